@@ -1,0 +1,332 @@
+"""The growth chamber: photons, plants and light, advanced by the Space Colonization Algorithm.
+
+SCA (Runions et al. 2007) as GrowSpace uses it: every node of a plant is a bud. Each lit photon
+attracts only the node nearest to it, if that node lies within the radius of influence. A bud
+attracted by photons grows one new segment of fixed length along the normalised sum of the unit
+vectors towards its photons. Photons closer than the kill distance to a new node are used up.
+At most ``max_branching`` buds grow per step; when more are attracted, a seeded draw picks them.
+
+Light decides which photons take part: those inside the beam or spotlight and, with shading,
+not under any part of a plant (the light shines from above). Photons never move, so each keeps
+a flag that the segments grown above it set.
+
+Positions are complex numbers ``x + 1j * z`` in metres: one array holds a 2-D point set, ``abs``
+is the Euclidean distance, and vector sums stay one operation. Arrays are preallocated for the
+whole episode so a step only appends.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from growspace_sim.core import light as lights
+from growspace_sim.core.config import SimConfig
+from growspace_sim.core.tasks import distance_reward, draw_layout, jaccard
+
+_DIRECTION_EPS = 1e-12  # a sum of unit vectors this short has no direction: the bud stays
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What one step produced."""
+
+    reward: float  # the challenge's reward for this step
+    plant_rewards: np.ndarray  # (n_plants,) float64; per-plant reward (target challenges)
+    success: bool  # target reached by every plant / shape matched well enough
+    truncated: bool  # the episode reached its length
+    new_segments: int  # segments grown this step
+
+
+class Chamber:
+    """One chamber: call ``reset`` to begin an episode, then ``step`` once per action.
+
+    Args:
+        cfg: the validated configuration.
+    """
+
+    def __init__(self, cfg: SimConfig) -> None:
+        self.cfg = cfg
+        w = cfg.chamber_width
+        self._res = cfg.resolution
+        self._unit = cfg.width_m(cfg.target_radius)
+        self._half_thickness = 0.5 * cfg.width_m(cfg.branch_thickness)
+        self._influence = cfg.width_m(cfg.radius_of_influence)
+        self._kill = cfg.width_m(cfg.kill_distance)
+        self._branch_length = cfg.branch_length_m
+        self._pixel = w / self._res  # m
+        self._sample_steps: dict[int, np.ndarray] = {}
+        self._capacity = 2 * cfg.plant_count + cfg.max_branching * cfg.episode_length
+        self.light: lights.Light | None = None
+        self.steps = 0
+
+    # ------------------------------------------------------------------ episode start
+    def reset(self, rng: np.random.Generator, target_image: np.ndarray | None = None) -> None:
+        """Begin an episode drawn from ``rng``.
+
+        Args:
+            rng: the episode's generator; layout and photons are drawn from it in a fixed order.
+            target_image: the shape challenge's 28 x 28 digit (uint8, ink > 127 is the digit).
+
+        Raises:
+            ValueError: if the shape challenge gets no target image or one of the wrong shape.
+        """
+        cfg = self.cfg
+        self._rng = rng
+        layout = draw_layout(cfg, rng)
+        n, cap = cfg.plant_count, self._capacity
+        self.target = layout.target
+        self.pos = np.zeros(cap, np.complex128)
+        self.parent = np.full(cap, -1, np.int32)
+        self.plant = np.zeros(cap, np.int16)
+        self.has_child = np.zeros(cap, bool)
+        self._descendants = np.zeros(cap + 1, np.int32)  # the last slot absorbs the sentinel
+        self._depth = np.zeros(cap, np.int32)
+        # Row i lists node i's ancestors (padded with the sentinel `cap`), so one bincount
+        # over the new rows updates every descendant count along their paths.
+        self._ancestors = np.full((cap, cfg.episode_length + 2), cap, np.int32)
+        self.n_nodes = 0
+        self._branch_counts = np.zeros(n, np.int64)
+        self._nearest = np.full(n, np.inf)  # m, per plant: closest node to the target
+        self.occupancy = np.zeros((self._res, self._res), bool)  # plant pixels (shape reward)
+        self.target_mask = None
+        if cfg.challenge == 'shape':
+            self.target_mask = self._target_mask(target_image)
+        self.light = lights.initial_light(cfg, layout.light_x, layout.light_z)
+        self.photons = self._scatter_photons(rng)
+        self._shaded = np.zeros(self.photons.size, bool)  # some plant part is above the photon
+        stem = cfg.width_m(cfg.first_branch_height)
+        roots = np.asarray(layout.stem_x, np.complex128)
+        self.pos[:n] = roots  # roots have no parent and no segment
+        self.plant[:n] = np.arange(n)
+        self.n_nodes = n
+        self._append(roots + 1j * stem, np.arange(n), stem)
+        self.steps = 0
+
+    def set_photons(self, photons: np.ndarray) -> None:
+        """Replace the photons (complex x + iz, m) of the current episode: crafted scenarios.
+
+        Shading is recomputed against every segment grown so far.
+
+        Raises:
+            ValueError: if a photon is not finite or lies outside the chamber.
+        """
+        photons = np.asarray(photons, np.complex128).reshape(-1)
+        cfg = self.cfg
+        bad = ~np.isfinite(photons) | (photons.real < 0) | (photons.real > cfg.chamber_width) \
+            | (photons.imag < 0) | (photons.imag > cfg.chamber_height)
+        if bad.any():
+            raise ValueError(f'photon {photons[bad][0]!r} is not inside the chamber '
+                             f'[0, {cfg.chamber_width}] x [0, {cfg.chamber_height}] m.')
+        self.photons = photons
+        self._shaded = np.zeros(photons.size, bool)
+        grown = np.flatnonzero(self.parent[:self.n_nodes] >= 0)
+        if grown.size:
+            self._shade(self.pos[self.parent[grown]], self.pos[grown])
+
+    def _scatter_photons(self, rng: np.random.Generator) -> np.ndarray:
+        cfg = self.cfg
+        count = cfg.light_density
+        x = rng.uniform(0.0, cfg.chamber_width, count)
+        z = rng.uniform(cfg.photon_min_height * cfg.chamber_height, cfg.chamber_height, count)
+        return x + 1j * z
+
+    def _target_mask(self, image: np.ndarray | None) -> np.ndarray:
+        if image is None:
+            raise ValueError('the shape challenge needs a target_image (a 28 x 28 digit).')
+        image = np.asarray(image)
+        if image.shape != (28, 28):
+            raise ValueError(f'target_image must be 28 x 28, got shape {image.shape}.')
+        index = np.arange(self._res) * 28 // self._res  # nearest-neighbour resize
+        return image[np.ix_(index, index)] > 127
+
+    # ------------------------------------------------------------------ one step
+    def step(self) -> StepOutcome:
+        """Grow one step under the current light (set it first: actions act at once).
+
+        Raises:
+            RuntimeError: if the episode has ended or ``reset`` was never called.
+        """
+        if self.light is None or self.steps >= self.cfg.episode_length:
+            raise RuntimeError('the episode is over; call reset() first.')
+        grown = self._grow()
+        self.steps += 1
+        return self._outcome(grown)
+
+    def _grow(self) -> int:
+        cfg = self.cfg
+        photons = self.photons
+        lit = self.light.illuminates(photons)
+        if cfg.shading:
+            lit &= ~self._shaded
+        lit_photons = photons[lit]
+        if lit_photons.size == 0:
+            return 0
+        n = self.n_nodes
+        offsets = lit_photons[:, None] - self.pos[:n]  # (lit photons, nodes)
+        distances = np.abs(offsets)
+        nearest = distances.argmin(axis=1)
+        rows = np.arange(lit_photons.size)
+        closest = distances[rows, nearest]
+        reach = closest < self._influence
+        if not reach.any():
+            return 0
+        nearest = nearest[reach]
+        pull = np.zeros(n, np.complex128)
+        np.add.at(pull, nearest, offsets[rows[reach], nearest] / closest[reach])
+        strength = np.abs(pull)
+        buds = np.flatnonzero(strength > _DIRECTION_EPS)
+        if buds.size > cfg.max_branching:
+            buds = np.sort(self._rng.choice(buds, cfg.max_branching, replace=False))
+        new = self.pos[buds] + self._branch_length * pull[buds] / strength[buds]
+        x, z = new.real, new.imag
+        if x.min() < 0.0 or x.max() > cfg.chamber_width or z.min() < 0.0 \
+                or z.max() > cfg.chamber_height:
+            # A segment that would pierce a wall, the floor or the ceiling is not grown.
+            inside = (x >= 0.0) & (x <= cfg.chamber_width) & (z >= 0.0) \
+                & (z <= cfg.chamber_height)
+            buds, new = buds[inside], new[inside]
+            if buds.size == 0:
+                return 0
+        self._append(new, buds, self._branch_length)
+        return int(buds.size)
+
+    def _append(self, new: np.ndarray, parents: np.ndarray, length: float) -> None:
+        """Add nodes with segments (of ``length`` m) to their parents; update what depends on them."""
+        start, end = self.n_nodes, self.n_nodes + new.size
+        self.n_nodes = end
+        plants = self.plant[parents]
+        self.pos[start:end] = new
+        self.parent[start:end] = parents
+        self.plant[start:end] = plants
+        self.has_child[parents] = True
+        self._branch_counts += np.bincount(plants, minlength=self._branch_counts.size)
+        depth = self._depth[parents]
+        self._depth[start:end] = depth + 1
+        ancestors = self._ancestors[parents]
+        ancestors[np.arange(new.size), depth] = parents
+        self._ancestors[start:end] = ancestors
+        self._descendants += np.bincount(ancestors.ravel(), minlength=self._descendants.size)
+        if self.target is not None:
+            np.minimum.at(self._nearest, plants, np.abs(new - self.target))
+        if self.target_mask is not None:
+            self._rasterise(self._samples(self.pos[parents], new, length))
+        self._update_photons(self.pos[parents], new)
+        self._outcome_cache = self._tips_cache = None
+
+    def _update_photons(self, a: np.ndarray, b: np.ndarray) -> None:
+        """Use up the photons at the new nodes b and shade those under the new segments a-b."""
+        alive = np.abs(self.photons[:, None] - b).min(axis=1) >= self._kill
+        if not alive.all():
+            self.photons = self.photons[alive]
+            self._shaded = self._shaded[alive]
+        self._shade(a, b)
+
+    def _shade(self, a: np.ndarray, b: np.ndarray) -> None:
+        """Flag the photons that segments a-b pass above.
+
+        A photon is shaded when a segment, widened by the branch thickness, passes above it: the
+        segment's highest point over the photon's thickness-wide column is above the photon.
+        """
+        half = self._half_thickness
+        x, z = self.photons.real[:, None], self.photons.imag[:, None]
+        ax, az, bx, bz = a.real, a.imag, b.real, b.imag
+        dx = bx - ax
+        dx = np.where(dx == 0.0, 1e-300, dx)  # a vertical segment spans t in [0, 1] at once
+        t0 = np.minimum(np.maximum((x - half - ax) / dx, 0.0), 1.0)
+        t1 = np.minimum(np.maximum((x + half - ax) / dx, 0.0), 1.0)
+        top = np.maximum(az + t0 * (bz - az), az + t1 * (bz - az))
+        below = (np.abs(x - 0.5 * (ax + bx)) <= 0.5 * np.abs(bx - ax) + half) & (z < top + half)
+        self._shaded |= below.any(axis=1)
+
+    def _samples(self, a: np.ndarray, b: np.ndarray, length: float) -> np.ndarray:
+        """Points along segments a-b of at most ``length`` metres, at most half a pixel apart."""
+        count = int(2.0 * length / self._pixel) + 2
+        t = self._sample_steps.get(count)
+        if t is None:
+            t = self._sample_steps[count] = np.linspace(0.0, 1.0, count)
+        return (a[:, None] + (b - a)[:, None] * t).ravel()
+
+    def _rasterise(self, points: np.ndarray) -> None:
+        """Mark the image pixels that sampled segment points fall in (the plant's pixel set)."""
+        res, cfg = self._res, self.cfg
+        col = (points.real * (res / cfg.chamber_width)).astype(np.intp)
+        row = ((cfg.chamber_height - points.imag) * (res / cfg.chamber_height)).astype(np.intp)
+        self.occupancy[np.minimum(row, res - 1), np.minimum(col, res - 1)] = True
+
+    def _outcome(self, grown: int) -> StepOutcome:
+        if self._outcome_cache is None:  # the reward changes only when the plant grows
+            self._outcome_cache = self._score()
+        reward, plant_rewards, success = self._outcome_cache
+        return StepOutcome(reward, plant_rewards.copy(), success,
+                           self.steps >= self.cfg.episode_length, grown)
+
+    def _score(self) -> tuple[float, np.ndarray, bool]:
+        if self.target_mask is not None:
+            reward = jaccard(self.occupancy, self.target_mask)
+            return reward, np.array([reward]), reward >= self.cfg.shape_success
+        plant_rewards = distance_reward(self._nearest, self._unit)
+        reward = float(plant_rewards.min())  # one plant: its reward; fairness: the worst
+        return reward, plant_rewards, reward >= 1.0
+
+    # ------------------------------------------------------------------ views
+    def current_reward(self) -> StepOutcome:
+        """The reward of the current state, as a step would report it (used after reset)."""
+        return self._outcome(0)
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """(N, 2) float64 node positions (x, z) in metres; a copy."""
+        pos = self.pos[:self.n_nodes]
+        return np.column_stack((pos.real, pos.imag))
+
+    @property
+    def shaded(self) -> np.ndarray:
+        """(M,) bool per remaining photon: some plant part is above it; a read-only view."""
+        view = self._shaded.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def descendants(self) -> np.ndarray:
+        """(N,) number of nodes above each node in its plant; a read-only view."""
+        view = self._descendants[:self.n_nodes]
+        view.flags.writeable = False
+        return view
+
+    def tips(self) -> np.ndarray:
+        """Indices of the branch tips (nodes without a child) of all plants."""
+        return np.flatnonzero(~self.has_child[:self.n_nodes])
+
+    def tip_positions(self) -> tuple[np.ndarray, ...]:
+        """Per plant, the (K, 2) positions (x, z) in metres of its branch tips (read-only)."""
+        if self._tips_cache is None:  # tips change only when the plant grows
+            self._tips_cache = self._tip_positions()
+        return self._tips_cache
+
+    def _tip_positions(self) -> tuple[np.ndarray, ...]:
+        tips = self.tips()
+        xz = np.column_stack((self.pos[tips].real, self.pos[tips].imag))
+        xz.flags.writeable = False
+        if self.cfg.plant_count == 1:
+            return (xz,)
+        owner = self.plant[tips]
+        per_plant = tuple(xz[owner == p] for p in range(self.cfg.plant_count))
+        for array in per_plant:
+            array.flags.writeable = False
+        return per_plant
+
+    def branch_counts(self) -> np.ndarray:
+        """(n_plants,) segments per plant (the initial stem counts as one); a copy."""
+        return self._branch_counts.copy()
+
+    def thickness(self) -> np.ndarray:
+        """(N,) thickness in metres of the segment ending at each node."""
+        return self.thickness_for(self.descendants)
+
+    def thickness_for(self, descendants: np.ndarray) -> np.ndarray:
+        """Segment thickness (m) for descendant counts; the cube root keeps an 84 px trunk
+        readable: a segment with 26 descendants is 3 times as thick as a twig."""
+        return self.cfg.width_m(self.cfg.branch_thickness) * np.cbrt(1.0 + descendants)

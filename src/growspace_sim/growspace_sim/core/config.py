@@ -1,0 +1,169 @@
+"""The one typed configuration of a chamber; the only place where defaults live.
+
+Geometry is in metres in the chamber frame: x along the light rail from the chamber's left wall,
+z up from the floor. Growth parameters keep the paper's unit, a fraction of the chamber width
+(GrowSpace appendix, table 'default parameters after performing a sweep'), so a plant looks the
+same in any chamber size; the ``*_m`` properties turn them into metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
+SETTINGS = ('easy', 'hard')
+REFERENCE_IMAGE_SIZE = 84  # px; the paper states light displacement in pixels of this image
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Everything that defines a chamber run, validated on construction.
+
+    Every field is a ROS parameter of ``sim_node`` with the same name (``config/growspace.yaml``).
+    Integer fields that ROS cannot leave unset use a documented sentinel (``0`` or ``-1``).
+    """
+
+    challenge: str = 'control'  # one of CHALLENGES
+    setting: str = 'easy'  # one of SETTINGS
+    chamber_width: float = 0.84  # m; 1 cm per pixel of the 84 px image
+    chamber_height: float = 0.84  # m
+    image_size: int = 0  # px, square; 0 = challenge default (84, or 28 for shape)
+    episode_length: int = 50  # steps; the episode is truncated (not terminated) after it
+    light_density: int = 200  # photons scattered per episode
+    photon_min_height: float = 0.25  # fraction of the height; photons lie above it
+    first_branch_height: float = 0.2  # fraction of the width; length of the initial stem
+    branch_length: float = 0.1  # fraction of the width; length of every new segment
+    branch_thickness: float = 0.015  # fraction of the width; thickness of a segment with no child
+    max_branching: int = 8  # new segments per step at most, over all plants
+    radius_of_influence: float = 0.15  # fraction of the width; photons farther do not attract
+    kill_distance: float = 0.05  # fraction of the width; photons closer to the plant are used up
+    light_width: float = 0.25  # fraction of the width; initial beam width
+    light_width_min: float = 0.1  # fraction of the width
+    light_width_max: float = 0.5  # fraction of the width
+    light_step_px: float = 5.0  # px of the 84 px reference image; light move per action
+    spot_radius: float = 0.1  # fraction of the width; initial spotlight radius
+    spot_radius_min: float = 0.05  # fraction of the width
+    spot_radius_max: float = 0.3  # fraction of the width
+    shading: bool = True  # photons under the plant's foliage are not lit
+    target_radius: float = 0.03  # fraction of the width; the reward's distance unit (see tasks)
+    n_plants: int = 2  # plants in the fairness challenge (n > 1); the others grow one
+    digits: tuple[int, ...] = ()  # shape targets drawn from these; () = setting (easy 3, hard 0)
+    shape_success: float = 0.5  # Jaccard index at which the shape counts as reached
+
+    def __post_init__(self) -> None:
+        _check_choice('challenge', self.challenge, CHALLENGES)
+        _check_choice('setting', self.setting, SETTINGS)
+        for name in ('chamber_width', 'chamber_height'):
+            _check_range(name, getattr(self, name), 0.01, 100.0)
+        if self.image_size != 0:
+            _check_range('image_size', self.image_size, 8, 1024, integer=True)
+        _check_range('episode_length', self.episode_length, 1, 1_000_000, integer=True)
+        _check_range('light_density', self.light_density, 1, 100_000, integer=True)
+        _check_range('max_branching', self.max_branching, 1, 1000, integer=True)
+        for name in ('photon_min_height', 'first_branch_height', 'branch_length',
+                     'branch_thickness', 'radius_of_influence', 'kill_distance', 'light_width',
+                     'light_width_min', 'light_width_max', 'spot_radius', 'spot_radius_min',
+                     'spot_radius_max', 'target_radius', 'shape_success'):
+            _check_range(name, getattr(self, name), 0.0, 1.0, low_open=True)
+        _check_range('light_step_px', self.light_step_px, 0.0, REFERENCE_IMAGE_SIZE,
+                     low_open=True)
+        if not isinstance(self.shading, bool):
+            raise ValueError(f'shading must be a bool, got {self.shading!r}.')
+        _check_order('light_width_min', self.light_width_min, 'light_width',
+                     self.light_width, 'light_width_max', self.light_width_max)
+        _check_order('spot_radius_min', self.spot_radius_min, 'spot_radius',
+                     self.spot_radius, 'spot_radius_max', self.spot_radius_max)
+        if self.kill_distance >= self.radius_of_influence:
+            raise ValueError(
+                f'kill_distance ({self.kill_distance}) must be lower than radius_of_influence '
+                f'({self.radius_of_influence}), or no photon could ever attract the plant.')
+        if self.first_branch_height * self.chamber_width >= self.chamber_height:
+            raise ValueError(
+                f'first_branch_height ({self.first_branch_height} of the width) must end below '
+                f'the chamber top ({self.chamber_height} m).')
+        _check_range('n_plants', self.n_plants, 1, 16, integer=True)
+        if self.challenge == 'fairness' and self.n_plants < 2:
+            raise ValueError(f'n_plants must be at least 2 for fairness, got {self.n_plants}.')
+        if not isinstance(self.digits, tuple) or not all(
+                isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= 9
+                for d in self.digits):
+            raise ValueError(f'digits must be a tuple of ints in 0..9, got {self.digits!r}.')
+
+    @classmethod
+    def from_dict(cls, values: dict) -> SimConfig:
+        """Build a config from a mapping (a ROS parameter dict), rejecting unknown keys.
+
+        Raises:
+            ValueError: on an unknown key or an invalid value.
+        """
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f'Unknown parameter(s) {unknown}; allowed: {sorted(known)}.')
+        values = dict(values)
+        if 'digits' in values:
+            values['digits'] = tuple(int(d) for d in values['digits'])
+        return cls(**values)
+
+    def replace(self, **changes) -> SimConfig:
+        """Return a validated copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    # Derived quantities live in properties so they can never drift from their source.
+    @property
+    def uses_spotlight(self) -> bool:
+        return self.challenge == 'shape'
+
+    @property
+    def plant_count(self) -> int:
+        return self.n_plants if self.challenge == 'fairness' else 1
+
+    @property
+    def resolution(self) -> int:
+        """Observation side in pixels."""
+        if self.image_size:
+            return self.image_size
+        return 28 if self.challenge == 'shape' else REFERENCE_IMAGE_SIZE
+
+    @property
+    def target_digits(self) -> tuple[int, ...]:
+        if self.digits:
+            return self.digits
+        return (3,) if self.setting == 'easy' else (0,)
+
+    @property
+    def branch_length_m(self) -> float:
+        return self.branch_length * self.chamber_width
+
+    @property
+    def light_step_m(self) -> float:
+        return self.light_step_px / REFERENCE_IMAGE_SIZE * self.chamber_width
+
+    def width_m(self, fraction: float) -> float:
+        """A fraction of the chamber width, in metres."""
+        return fraction * self.chamber_width
+
+
+def _check_choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ValueError(f'{name} must be one of {allowed}, got {value!r}.')
+
+
+def _check_range(name: str, value: object, low: float, high: float, *, integer: bool = False,
+                 low_open: bool = False) -> None:
+    kind = int if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kind):
+        expected = 'an int' if integer else 'a number'
+        raise ValueError(f'{name} must be {expected}, got {value!r}.')
+    if not math.isfinite(value) or value > high or value < low or (low_open and value == low):
+        bracket = ']' if low_open else '['
+        raise ValueError(f'{name} must be in {bracket}{low}, {high}], got {value!r}.')
+
+
+def _check_order(low_name: str, low: float, mid_name: str, mid: float, high_name: str,
+                 high: float) -> None:
+    if not low <= mid <= high:
+        raise ValueError(
+            f'{low_name} ({low}) <= {mid_name} ({mid}) <= {high_name} ({high}) must hold.')

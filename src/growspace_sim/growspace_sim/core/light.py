@@ -1,0 +1,153 @@
+"""The chamber light: a vertical beam or a circular spotlight, its actions and its clamping.
+
+The light is always inside the chamber: a beam spans ``[x - width/2, x + width/2]`` within the
+walls, a spotlight's disc lies within the walls, floor and ceiling. Every way of moving it ends in
+``clamp``, so RL actions, absolute commands from ROS and a future LED gantry share one rule.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from growspace_sim.core.config import SimConfig
+
+BEAM_ACTIONS = ('left', 'right', 'stay', 'wider', 'narrower')
+SPOT_ACTIONS = ('left', 'right', 'up', 'down', 'bigger', 'smaller', 'stay')
+
+
+@dataclass
+class Light:
+    """Where the light is, in metres in the chamber frame."""
+
+    spot: bool  # True: circular spotlight (x, z, radius); False: vertical beam (x, width)
+    x: float  # m, centre along the rail
+    z: float  # m, spotlight centre height (unused by the beam)
+    width: float  # m, beam width (unused by the spotlight)
+    radius: float  # m, spotlight radius (unused by the beam)
+
+    def illuminates(self, photons: np.ndarray) -> np.ndarray:
+        """Mask of the photons (complex x + iz, m) inside the light, before shading."""
+        if self.spot:
+            return np.abs(photons - complex(self.x, self.z)) <= self.radius
+        return np.abs(photons.real - self.x) <= 0.5 * self.width
+
+    def copy(self) -> Light:
+        return Light(self.spot, self.x, self.z, self.width, self.radius)
+
+
+def initial_light(cfg: SimConfig, x: float, z: float) -> Light:
+    """A light of the configured initial size centred at (x, z), clamped into the chamber."""
+    light = Light(cfg.uses_spotlight, x, z, cfg.width_m(cfg.light_width),
+                  cfg.width_m(cfg.spot_radius))
+    clamp(light, cfg)
+    return light
+
+
+def clamp(light: Light, cfg: SimConfig) -> bool:
+    """Bring the light back inside its limits; returns True if anything had to change."""
+    before = (light.x, light.z, light.width, light.radius)
+    w, h = cfg.chamber_width, cfg.chamber_height
+    if light.spot:
+        light.radius = _clip(light.radius, cfg.width_m(cfg.spot_radius_min),
+                             cfg.width_m(cfg.spot_radius_max))
+        light.x = _clip(light.x, light.radius, w - light.radius)
+        light.z = _clip(light.z, light.radius, h - light.radius)
+    else:
+        light.width = _clip(light.width, cfg.width_m(cfg.light_width_min),
+                            cfg.width_m(cfg.light_width_max))
+        half = 0.5 * light.width
+        light.x = _clip(light.x, half, w - half)
+    return before != (light.x, light.z, light.width, light.radius)
+
+
+def apply_discrete(light: Light, action: int, cfg: SimConfig) -> None:
+    """Move or resize the light by one discrete action (BEAM_ACTIONS or SPOT_ACTIONS).
+
+    Raises:
+        ValueError: if ``action`` is not an index of the light's action list.
+    """
+    names = SPOT_ACTIONS if light.spot else BEAM_ACTIONS
+    if isinstance(action, bool) or not isinstance(action, (int, np.integer)) \
+            or not 0 <= action < len(names):
+        raise ValueError(f'action must be an int in [0, {len(names) - 1}] '
+                         f'({", ".join(names)}), got {action!r}.')
+    step = cfg.light_step_m
+    name = names[action]
+    if name == 'left':
+        light.x -= step
+    elif name == 'right':
+        light.x += step
+    elif name == 'up':
+        light.z += step
+    elif name == 'down':
+        light.z -= step
+    elif name == 'wider':
+        light.width += step
+    elif name == 'narrower':
+        light.width -= step
+    elif name == 'bigger':
+        light.radius += 0.5 * step
+    elif name == 'smaller':
+        light.radius -= 0.5 * step
+    clamp(light, cfg)
+
+
+def continuous_size(light: Light) -> int:
+    """Length of the continuous action vector: (velocity, width) or (dx, dz, radius)."""
+    return 3 if light.spot else 2
+
+
+def apply_continuous(light: Light, action: np.ndarray, cfg: SimConfig) -> None:
+    """Apply a continuous action, every component in [-1, 1].
+
+    Beam: ``(velocity, width)``; velocity 1 moves one light step right, width maps [-1, 1]
+    linearly onto [light_width_min, light_width_max]. Spotlight: ``(dx, dz, radius)`` with dx and
+    dz in light steps and radius mapped onto [spot_radius_min, spot_radius_max].
+
+    Raises:
+        ValueError: on a wrong length or a value that is not finite or outside [-1, 1].
+    """
+    size = continuous_size(light)
+    values = np.asarray(action, dtype=np.float64).reshape(-1)
+    if values.size != size:
+        raise ValueError(f'continuous action must have {size} values, got {values.size}.')
+    bad = ~np.isfinite(values) | (np.abs(values) > 1.0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f'continuous action[{i}] must be finite and in [-1, 1], '
+                         f'got {float(values[i])!r}.')
+    step = cfg.light_step_m
+    light.x += float(values[0]) * step
+    if light.spot:
+        light.z += float(values[1]) * step
+        light.radius = _lerp(cfg.width_m(cfg.spot_radius_min),
+                             cfg.width_m(cfg.spot_radius_max), float(values[2]))
+    else:
+        light.width = _lerp(cfg.width_m(cfg.light_width_min),
+                            cfg.width_m(cfg.light_width_max), float(values[1]))
+    clamp(light, cfg)
+
+
+def set_absolute(light: Light, cfg: SimConfig, x: float, z: float, width: float,
+                 radius: float) -> None:
+    """Place the light at absolute coordinates (m), as an LED gantry would be commanded.
+
+    Raises:
+        ValueError: naming the first coordinate that is not finite.
+    """
+    for name, value in (('x', x), ('z', z), ('width', width), ('radius', radius)):
+        if not math.isfinite(value):
+            raise ValueError(f'light {name} must be finite, got {value!r}.')
+    light.x, light.z, light.width, light.radius = x, z, width, radius
+    clamp(light, cfg)
+
+
+def _clip(value: float, low: float, high: float) -> float:
+    return low if value < low else high if value > high else value
+
+
+def _lerp(low: float, high: float, unit: float) -> float:
+    return low + 0.5 * (unit + 1.0) * (high - low)

@@ -1,0 +1,109 @@
+"""Observation images of a chamber: the only module that draws, kept apart from the core.
+
+The image is RGB with one entity per channel, so nothing hides anything else:
+red = target (disc or digit), green = plant, blue = light. Pixel (0, 0) is the top-left corner
+(as in ``sensor_msgs/Image``): column = x / width * size, row = (height - z) / height * size.
+The plant is drawn incrementally (segments only ever appear or thicken), so a step draws only
+what changed.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from growspace_sim.core.chamber import Chamber
+from growspace_sim.core.config import SimConfig
+
+TARGET, PLANT, LIGHT = 0, 1, 2  # channel of each entity
+INTENSITY = (255, 255, 128)  # the light is dimmer so the image reads like the paper's
+_SHIFT = 4  # cv2 fixed-point bits: sub-pixel endpoints, integer arithmetic, same bytes everywhere
+
+
+class Renderer:
+    """Draws one chamber's observation; call ``reset`` after each ``Chamber.reset``."""
+
+    def __init__(self, cfg: SimConfig) -> None:
+        self.cfg = cfg
+        self.size = cfg.resolution
+        self._px_per_m = self.size / cfg.chamber_width
+        self._rows_per_m = self.size / cfg.chamber_height
+        self._image = np.zeros((self.size, self.size, 3), np.uint8)
+        self._plant = np.zeros((self.size, self.size), np.uint8)
+        self._light = np.zeros((self.size, self.size), np.uint8)
+        self._target = np.zeros((self.size, self.size), np.uint8)
+        self._drawn_nodes = -1
+        self._drawn_light: tuple[float, ...] | None = None
+        self._drawn_px = np.zeros(0, np.int32)
+        self._px_for_descendants = np.zeros(0, np.int32)
+
+    def reset(self, chamber: Chamber) -> None:
+        """Forget the previous episode and draw the new target."""
+        self._plant.fill(0)
+        self._target.fill(0)
+        if chamber.target_mask is not None:
+            self._target[chamber.target_mask] = INTENSITY[TARGET]
+        else:
+            radius = chamber.cfg.width_m(chamber.cfg.target_radius)
+            cv2.circle(self._target, self._point(chamber.target), self._fixed(radius),
+                       INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)
+        self._image[..., TARGET] = self._target
+        self._drawn_nodes = -1  # force a full plant and light draw
+        self._drawn_light = None
+        self._drawn_px = np.zeros(chamber.pos.size, np.int32)
+        # Pixel thickness for every possible descendant count, so a step only looks it up.
+        base = chamber.thickness_for(np.arange(chamber.pos.size + 1))
+        self._px_for_descendants = np.maximum(np.rint(base * self._px_per_m), 1).astype(np.int32)
+
+    def render(self, chamber: Chamber) -> np.ndarray:
+        """The observation (size, size, 3) uint8 RGB; a new array each call."""
+        if chamber.n_nodes != self._drawn_nodes:  # the plant only changes when it grows
+            self._draw_plant(chamber)
+            self._image[..., PLANT] = self._plant
+            self._drawn_nodes = chamber.n_nodes
+        light = chamber.light
+        placement = (light.x, light.z, light.width, light.radius)
+        if placement != self._drawn_light:
+            self._draw_light(chamber)
+            self._image[..., LIGHT] = self._light
+            self._drawn_light = placement
+        return self._image.copy()
+
+    def features(self, chamber: Chamber) -> np.ndarray:
+        """The same scene as binary feature maps (size, size, 3) uint8 in {0, 1}."""
+        return (self.render(chamber) > 0).view(np.uint8)
+
+    def _draw_plant(self, chamber: Chamber) -> None:
+        if chamber.target_mask is not None:  # shape: exactly the pixels the reward counts
+            self._plant[chamber.occupancy] = INTENSITY[PLANT]
+            return
+        n = chamber.n_nodes
+        px = self._px_for_descendants[chamber.descendants[:n]]
+        todo = np.flatnonzero(px > self._drawn_px[:n])  # new segments and thickened ones
+        parents = chamber.parent[todo]
+        for i, parent in zip(todo.tolist(), parents.tolist()):
+            if parent >= 0:
+                cv2.line(self._plant, self._point(chamber.pos[parent]),
+                         self._point(chamber.pos[i]), INTENSITY[PLANT], int(px[i]), cv2.LINE_8,
+                         _SHIFT)
+        self._drawn_px[:n] = px
+
+    def _draw_light(self, chamber: Chamber) -> None:
+        light = chamber.light
+        self._light.fill(0)
+        if light.spot:
+            cv2.circle(self._light, self._point(complex(light.x, light.z)),
+                       self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
+        else:
+            left = int(round((light.x - 0.5 * light.width) * self._px_per_m))
+            right = int(round((light.x + 0.5 * light.width) * self._px_per_m))
+            self._light[:, max(left, 0):right] = INTENSITY[LIGHT]
+
+    def _point(self, p: complex) -> tuple[int, int]:
+        # Pixel i covers [i, i + 1) and OpenCV addresses its centre i, hence the half pixel.
+        col = p.real * self._px_per_m - 0.5
+        row = (self.cfg.chamber_height - p.imag) * self._rows_per_m - 0.5
+        return int(round(col * (1 << _SHIFT))), int(round(row * (1 << _SHIFT)))
+
+    def _fixed(self, metres: float) -> int:
+        return int(round(metres * self._px_per_m * (1 << _SHIFT)))

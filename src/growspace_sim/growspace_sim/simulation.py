@@ -1,0 +1,88 @@
+"""One chamber with its renderer, targets and random stream: what every adapter drives.
+
+The Gymnasium env, the ROS node and replay all advance a ``Simulation``, so the same seed and
+the same actions give the same images, rewards and plants whichever way they arrive.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from growspace_sim import digits as digit_data
+from growspace_sim.core import light as lights
+from growspace_sim.core.chamber import Chamber, StepOutcome
+from growspace_sim.core.config import SimConfig
+from growspace_sim.render import Renderer
+
+
+class Simulation:
+    """A chamber, its renderer and its episode generator.
+
+    Args:
+        cfg: the validated configuration.
+        digit_source: where shape targets come from (``growspace_sim.digits.load_digits``).
+    """
+
+    def __init__(self, cfg: SimConfig, digit_source: str = 'auto') -> None:
+        self.cfg = cfg
+        self.chamber = Chamber(cfg)
+        self.renderer = Renderer(cfg)
+        self.digit_set = digit_data.load_digits(digit_source) if cfg.challenge == 'shape' else None
+        self.target_digits = cfg.target_digits
+        self.digit: int | None = None
+        self.rng = np.random.default_rng()
+        self.seed: int | None = None
+        self.episode = 0
+
+    def set_target_digits(self, digits: Sequence[int]) -> None:
+        """Draw shape targets from these digits from the next reset on (curriculum learning).
+
+        Raises:
+            ValueError: if a digit is not in 0..9.
+        """
+        digits = tuple(int(d) for d in digits)
+        self.cfg.replace(digits=digits)  # validates
+        self.target_digits = digits
+
+    def reset(self, seed: int | None = None,
+              rng: np.random.Generator | None = None) -> StepOutcome:
+        """Begin an episode; a seed restarts the random stream, as Gymnasium's ``reset`` does.
+
+        Args:
+            seed: restart the stream from this seed (``np.random.default_rng(seed)``, the same
+                generator Gymnasium builds for ``reset(seed=seed)``); None continues it.
+            rng: use this generator instead (the Gymnasium env passes its ``np_random``).
+        """
+        if rng is not None:
+            self.rng = rng
+        elif seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self.seed = seed if seed is not None else self.seed
+        image = None
+        if self.digit_set is not None:
+            image, self.digit = self.digit_set.sample(self.rng, self.target_digits)
+        self.chamber.reset(self.rng, image)
+        self.renderer.reset(self.chamber)
+        self.episode += 1
+        return self.chamber.current_reward()
+
+    def apply_discrete(self, action: int) -> None:
+        lights.apply_discrete(self.chamber.light, action, self.cfg)
+
+    def apply_continuous(self, action: np.ndarray) -> None:
+        lights.apply_continuous(self.chamber.light, action, self.cfg)
+
+    def place_light(self, x: float, z: float, width: float, radius: float) -> None:
+        lights.set_absolute(self.chamber.light, self.cfg, x, z, width, radius)
+
+    def step(self) -> StepOutcome:
+        """Grow one step under the light as it is now."""
+        return self.chamber.step()
+
+    def observe(self, features: bool = False) -> np.ndarray:
+        """The observation image (RGB uint8), or binary feature maps."""
+        if features:
+            return self.renderer.features(self.chamber)
+        return self.renderer.render(self.chamber)
