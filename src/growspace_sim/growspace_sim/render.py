@@ -32,6 +32,11 @@ class Renderer:
         self._plant = np.zeros((self.size, self.size), np.uint8)
         self._light = np.zeros((self.size, self.size), np.uint8)
         self._target = np.zeros((self.size, self.size), np.uint8)
+        # col = x * px_per_m - 0.5 and row = (height - z) * rows_per_m - 0.5, in 1/16 px:
+        # pixel i covers [i, i + 1) and OpenCV addresses its centre i, hence the half pixel.
+        one = 1 << _SHIFT
+        self._fixed_scale = np.array([self._px_per_m, -self._rows_per_m]) * one
+        self._fixed_offset = np.array([-0.5, cfg.chamber_height * self._rows_per_m - 0.5]) * one
         self._drawn_nodes = -1
         self._drawn_light: tuple[float, ...] | None = None
         self._drawn_px = np.zeros(0, np.int32)
@@ -77,16 +82,19 @@ class Renderer:
         if chamber.target_mask is not None:  # shape: exactly the pixels the reward counts
             self._plant[chamber.occupancy] = INTENSITY[PLANT]
             return
-        n = chamber.n_nodes
-        px = self._px_for_descendants[chamber.descendants[:n]]
-        todo = np.flatnonzero(px > self._drawn_px[:n])  # new segments and thickened ones
-        parents = chamber.parent[todo]
-        for i, parent in zip(todo.tolist(), parents.tolist()):
-            if parent >= 0:
-                cv2.line(self._plant, self._point(chamber.pos[parent]),
-                         self._point(chamber.pos[i]), INTENSITY[PLANT], int(px[i]), cv2.LINE_8,
-                         _SHIFT)
-        self._drawn_px[:n] = px
+        roots, n = chamber.cfg.plant_count, chamber.n_nodes  # roots come first, with no segment
+        px = self._px_for_descendants[chamber.descendants[roots:]]
+        todo = np.flatnonzero(px > self._drawn_px[roots:n])  # new segments and thickened ones
+        self._drawn_px[roots:n] = px
+        if todo.size == 0:
+            return
+        thickness = px[todo].tolist()
+        todo += roots
+        ends = self._fixed_points(np.concatenate((chamber.pos[todo],
+                                                  chamber.pos[chamber.parent[todo]])))
+        ends = ends.reshape(2, todo.size, 2).tolist()
+        for end, start, width in zip(ends[0], ends[1], thickness):
+            cv2.line(self._plant, start, end, INTENSITY[PLANT], width, cv2.LINE_8, _SHIFT)
 
     def _draw_light(self, chamber: Chamber) -> None:
         light = chamber.light
@@ -100,10 +108,12 @@ class Renderer:
             self._light[:, max(left, 0):right] = INTENSITY[LIGHT]
 
     def _point(self, p: complex) -> tuple[int, int]:
-        # Pixel i covers [i, i + 1) and OpenCV addresses its centre i, hence the half pixel.
-        col = p.real * self._px_per_m - 0.5
-        row = (self.cfg.chamber_height - p.imag) * self._rows_per_m - 0.5
-        return int(round(col * (1 << _SHIFT))), int(round(row * (1 << _SHIFT)))
+        return tuple(self._fixed_points(np.array([p]))[0].tolist())
+
+    def _fixed_points(self, points: np.ndarray) -> np.ndarray:
+        """(K, 2) int32 OpenCV fixed-point (col, row) of chamber points (complex, m)."""
+        xz = points.view(np.float64).reshape(-1, 2)  # a complex array is (x, z) pairs in memory
+        return np.rint(xz * self._fixed_scale + self._fixed_offset).astype(np.int32)
 
     def _fixed(self, metres: float) -> int:
         return int(round(metres * self._px_per_m * (1 << _SHIFT)))

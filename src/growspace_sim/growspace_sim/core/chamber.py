@@ -7,8 +7,8 @@ vectors towards its photons. Photons closer than the kill distance to a new node
 At most ``max_branching`` buds grow per step; when more are attracted, a seeded draw picks them.
 
 Light decides which photons take part: those inside the beam or spotlight and, with shading,
-not under any part of a plant (the light shines from above). Photons never move, so each keeps
-a flag that the segments grown above it set.
+not under any part of a plant (the light shines from above). The chamber keeps the height of the
+plant's top over columns one branch thickness wide; a photon below it is in the shade.
 
 Positions are complex numbers ``x + 1j * z`` in metres: one array holds a 2-D point set, ``abs``
 is the Euclidean distance, and vector sums stay one operation. Arrays are preallocated for the
@@ -57,6 +57,8 @@ class Chamber:
         self._kill = cfg.width_m(cfg.kill_distance)
         self._branch_length = cfg.branch_length_m
         self._pixel = w / self._res  # m
+        self._column_width = cfg.width_m(cfg.branch_thickness)  # m, shading resolution
+        self._longest = max(cfg.branch_length_m, cfg.width_m(cfg.first_branch_height))
         self._sample_steps: dict[int, np.ndarray] = {}
         self._capacity = 2 * cfg.plant_count + cfg.max_branching * cfg.episode_length
         self.light: lights.Light | None = None
@@ -95,20 +97,19 @@ class Chamber:
         if cfg.challenge == 'shape':
             self.target_mask = self._target_mask(target_image)
         self.light = lights.initial_light(cfg, layout.light_x, layout.light_z)
+        self._canopy = np.zeros(int(math.ceil(cfg.chamber_width / self._column_width)))  # m
         self.photons = self._scatter_photons(rng)
-        self._shaded = np.zeros(self.photons.size, bool)  # some plant part is above the photon
+        self._photon_column = self._column_of(self.photons.real)
         stem = cfg.width_m(cfg.first_branch_height)
         roots = np.asarray(layout.stem_x, np.complex128)
         self.pos[:n] = roots  # roots have no parent and no segment
         self.plant[:n] = np.arange(n)
         self.n_nodes = n
-        self._append(roots + 1j * stem, np.arange(n), stem)
+        self._append(roots + 1j * stem, np.arange(n))
         self.steps = 0
 
     def set_photons(self, photons: np.ndarray) -> None:
         """Replace the photons (complex x + iz, m) of the current episode: crafted scenarios.
-
-        Shading is recomputed against every segment grown so far.
 
         Raises:
             ValueError: if a photon is not finite or lies outside the chamber.
@@ -121,10 +122,7 @@ class Chamber:
             raise ValueError(f'photon {photons[bad][0]!r} is not inside the chamber '
                              f'[0, {cfg.chamber_width}] x [0, {cfg.chamber_height}] m.')
         self.photons = photons
-        self._shaded = np.zeros(photons.size, bool)
-        grown = np.flatnonzero(self.parent[:self.n_nodes] >= 0)
-        if grown.size:
-            self._shade(self.pos[self.parent[grown]], self.pos[grown])
+        self._photon_column = self._column_of(photons.real)
 
     def _scatter_photons(self, rng: np.random.Generator) -> np.ndarray:
         cfg = self.cfg
@@ -160,7 +158,7 @@ class Chamber:
         photons = self.photons
         lit = self.light.illuminates(photons)
         if cfg.shading:
-            lit &= ~self._shaded
+            lit &= self._canopy[self._photon_column] <= photons.imag
         lit_photons = photons[lit]
         if lit_photons.size == 0:
             return 0
@@ -190,11 +188,11 @@ class Chamber:
             buds, new = buds[inside], new[inside]
             if buds.size == 0:
                 return 0
-        self._append(new, buds, self._branch_length)
+        self._append(new, buds)
         return int(buds.size)
 
-    def _append(self, new: np.ndarray, parents: np.ndarray, length: float) -> None:
-        """Add nodes with segments (of ``length`` m) to their parents; update what depends on them."""
+    def _append(self, new: np.ndarray, parents: np.ndarray) -> None:
+        """Add nodes with segments to their parents and update what depends on them."""
         start, end = self.n_nodes, self.n_nodes + new.size
         self.n_nodes = end
         plants = self.plant[parents]
@@ -212,38 +210,38 @@ class Chamber:
         if self.target is not None:
             np.minimum.at(self._nearest, plants, np.abs(new - self.target))
         if self.target_mask is not None:
-            self._rasterise(self._samples(self.pos[parents], new, length))
+            self._rasterise(self._samples(self.pos[parents], new, 0.5 * self._pixel))
         self._update_photons(self.pos[parents], new)
         self._outcome_cache = self._tips_cache = None
 
     def _update_photons(self, a: np.ndarray, b: np.ndarray) -> None:
-        """Use up the photons at the new nodes b and shade those under the new segments a-b."""
+        """Use up the photons at the new nodes b and raise the canopy over the segments a-b."""
         alive = np.abs(self.photons[:, None] - b).min(axis=1) >= self._kill
         if not alive.all():
             self.photons = self.photons[alive]
-            self._shaded = self._shaded[alive]
+            self._photon_column = self._photon_column[alive]
         self._shade(a, b)
 
     def _shade(self, a: np.ndarray, b: np.ndarray) -> None:
-        """Flag the photons that segments a-b pass above.
+        """Raise the canopy (top of the plant per column) over the segments a-b.
 
-        A photon is shaded when a segment, widened by the branch thickness, passes above it: the
-        segment's highest point over the photon's thickness-wide column is above the photon.
+        Columns are one branch thickness wide. Points sampled along each segment one column
+        apart, each widened by half the thickness to both sides, mark every column the
+        thickened segment covers, at the height of a point at most one column away.
         """
+        points = self._samples(a, b, self._column_width)
         half = self._half_thickness
-        x, z = self.photons.real[:, None], self.photons.imag[:, None]
-        ax, az, bx, bz = a.real, a.imag, b.real, b.imag
-        dx = bx - ax
-        dx = np.where(dx == 0.0, 1e-300, dx)  # a vertical segment spans t in [0, 1] at once
-        t0 = np.minimum(np.maximum((x - half - ax) / dx, 0.0), 1.0)
-        t1 = np.minimum(np.maximum((x + half - ax) / dx, 0.0), 1.0)
-        top = np.maximum(az + t0 * (bz - az), az + t1 * (bz - az))
-        below = (np.abs(x - 0.5 * (ax + bx)) <= 0.5 * np.abs(bx - ax) + half) & (z < top + half)
-        self._shaded |= below.any(axis=1)
+        columns = self._column_of(np.concatenate((points.real - half, points.real + half)))
+        top = points.imag + half
+        np.maximum.at(self._canopy, columns, np.concatenate((top, top)))
 
-    def _samples(self, a: np.ndarray, b: np.ndarray, length: float) -> np.ndarray:
-        """Points along segments a-b of at most ``length`` metres, at most half a pixel apart."""
-        count = int(2.0 * length / self._pixel) + 2
+    def _column_of(self, x: np.ndarray) -> np.ndarray:
+        column = (x * (1.0 / self._column_width)).astype(np.intp)
+        return np.minimum(np.maximum(column, 0), self._canopy.size - 1)
+
+    def _samples(self, a: np.ndarray, b: np.ndarray, spacing: float) -> np.ndarray:
+        """Points along segments a-b (of at most one branch length), at most ``spacing`` apart."""
+        count = int(self._longest / spacing) + 2
         t = self._sample_steps.get(count)
         if t is None:
             t = self._sample_steps[count] = np.linspace(0.0, 1.0, count)
@@ -284,10 +282,8 @@ class Chamber:
 
     @property
     def shaded(self) -> np.ndarray:
-        """(M,) bool per remaining photon: some plant part is above it; a read-only view."""
-        view = self._shaded.view()
-        view.flags.writeable = False
-        return view
+        """(M,) bool per remaining photon: some part of the plant is above it."""
+        return self._canopy[self._photon_column] > self.photons.imag
 
     @property
     def descendants(self) -> np.ndarray:

@@ -1,0 +1,128 @@
+"""Environment speed benchmark (``growspace-bench``), with a fixed method.
+
+Per challenge (easy setting, discrete actions): uniform random actions from a seeded action
+space, 50-step episodes, observations rendered every step, through ``gymnasium.make`` (so the
+default wrappers are included). After one warm-up episode, it times ``--episodes`` episodes
+``--repeats`` times and reports the best repeat (the least disturbed by other processes), plus
+the core alone (no rendering, no Gymnasium) on the same seeds so the ratio shows the overhead.
+The process is pinned to one CPU. Also reported: mean reset time, mean segments per plant at
+step 50 and the peak resident memory.
+
+    growspace-bench                 # all challenges
+    growspace-bench --profile       # and where the time goes in control (cProfile top 15)
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import os
+import pstats
+import resource
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import growspace_sim  # noqa: F401  (registers the ids)
+from growspace_sim.core import light as lights
+from growspace_sim.core.chamber import Chamber
+from growspace_sim.core.config import CHALLENGES
+from growspace_sim.registration import env_id
+from growspace_sim.simulation import Simulation
+
+TARGETS = {'control': 10_000, 'fairness': 5_000}  # steps/s on one core, from the issue
+
+
+def run_env(name: str, episodes: int, seed: int) -> tuple[float, float, float]:
+    """(steps/s, mean reset seconds, mean segments per plant at the last step)."""
+    env = gym.make(name)
+    env.action_space.seed(seed)
+    actions = [env.action_space.sample() for _ in range(50 * episodes)]
+    reset_time, segments, steps = 0.0, [], 0
+    start = time.perf_counter()
+    for episode in range(episodes):
+        t = time.perf_counter()
+        env.reset(seed=seed + episode)
+        reset_time += time.perf_counter() - t
+        truncated = False
+        while not truncated:
+            _, _, _, truncated, info = env.step(actions[steps])
+            steps += 1
+        segments.append(np.mean(info['branch_counts']))
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps / elapsed, reset_time / episodes, float(np.mean(segments))
+
+
+def run_core(challenge: str, episodes: int, seed: int) -> float:
+    """Steps/s of the growth core alone (no rendering, no Gymnasium) on the same kind of run."""
+    sim = Simulation(growspace_sim.core.SimConfig(challenge=challenge))
+    chamber: Chamber = sim.chamber
+    n_actions = len(lights.SPOT_ACTIONS if chamber.cfg.uses_spotlight else lights.BEAM_ACTIONS)
+    actions = np.random.default_rng(seed).integers(n_actions, size=50 * episodes).tolist()
+    steps = 0
+    start = time.perf_counter()
+    for episode in range(episodes):
+        sim.reset(seed=seed + episode)
+        for _ in range(50):
+            lights.apply_discrete(chamber.light, actions[steps], chamber.cfg)
+            chamber.step()
+            steps += 1
+    return steps / (time.perf_counter() - start)
+
+
+def best_of(repeats: int, fn, *args):
+    results = [fn(*args) for _ in range(repeats)]
+    return max(results, key=lambda r: r[0] if isinstance(r, tuple) else r)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--episodes', type=int, default=200, help='timed episodes per repeat')
+    parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--challenges', default=','.join(CHALLENGES))
+    parser.add_argument('--profile', action='store_true', help='profile the control env')
+    args = parser.parse_args(argv)
+    pinned = hasattr(os, 'sched_setaffinity')
+    if pinned:
+        cpus = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {min(cpus)})
+    try:
+        _report(args)
+    finally:
+        if pinned:
+            os.sched_setaffinity(0, cpus)
+    return 0
+
+
+def _report(args: argparse.Namespace) -> None:
+    print(f'GrowSpace env benchmark: {args.episodes} x 50-step episodes, best of {args.repeats}, '
+          f'1 CPU, numpy {np.__version__}, Python {sys.version.split()[0]}\n')
+    print('| challenge | env steps/s | core steps/s | env/core | reset ms | segments at step 50 '
+          '| target |')
+    print('|---|---|---|---|---|---|---|')
+    for challenge in args.challenges.split(','):
+        name = env_id(challenge, 'easy')
+        run_env(name, 1, args.seed)  # warm-up: imports, caches, first allocations
+        rate, reset_s, segments = best_of(args.repeats, run_env, name, args.episodes, args.seed)
+        core = best_of(args.repeats, run_core, challenge, args.episodes, args.seed)
+        target = TARGETS.get(challenge)
+        verdict = '' if target is None else f'>= {target:,}: {"met" if rate >= target else "NOT met"}'
+        print(f'| {challenge} | {rate:,.0f} | {core:,.0f} | {rate / core:.2f} | '
+              f'{reset_s * 1e3:.2f} | {segments:.1f} | {verdict} |')
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f'\npeak RSS {peak_mib:.0f} MiB')
+    if args.profile:
+        profiler = cProfile.Profile()
+        profiler.runcall(run_env, env_id('control', 'easy'), 100, args.seed)
+        out = io.StringIO()
+        pstats.Stats(profiler, stream=out).sort_stats('tottime').print_stats(15)
+        print(out.getvalue())
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,65 @@
+"""Reference agents and the evaluation and benchmark scripts."""
+
+from __future__ import annotations
+
+import csv
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from growspace_sim import bench, evaluate
+from growspace_sim.agents import OracleAgent, RandomAgent, run_episode
+from growspace_sim.core.config import CHALLENGES
+from growspace_sim.registration import env_id
+
+
+def test_random_agent_is_seeded():
+    env = gym.make('GrowSpace/Control-Easy-v0')
+    first, second = RandomAgent(env.action_space, 3), RandomAgent(env.action_space, 3)
+    a = [first.act(None, env) for _ in range(20)]
+    first.action_space.seed(3)
+    b = [second.act(None, env) for _ in range(20)]
+    assert a == b and len(set(a)) > 1
+
+
+@pytest.mark.parametrize('challenge', CHALLENGES)
+def test_oracle_returns_valid_actions_and_beats_random_on_average(challenge):
+    env = gym.make(env_id(challenge, 'hard'))
+    seeds = range(100, 106)
+    oracle = [run_episode(env, OracleAgent(), s)[0] for s in seeds]
+    random = [run_episode(env, RandomAgent(env.action_space, 0), s)[0] for s in seeds]
+    assert np.mean(oracle) > np.mean(random)
+
+
+def test_oracle_refuses_continuous_envs():
+    env = gym.make('GrowSpace/ControlContinuous-Easy-v0')
+    obs, _ = env.reset(seed=0)
+    with pytest.raises(ValueError, match='discrete'):
+        OracleAgent().act(obs, env)
+
+
+def test_eval_script_writes_the_expected_columns(tmp_path, capsys):
+    out = tmp_path / 'eval.csv'
+    assert evaluate.main(['--episodes', '2', '--challenges', 'control,shape',
+                          '--settings', 'easy', '--csv', str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r['challenge'] for r in rows] == ['control', 'shape']
+    assert list(rows[0]) == list(evaluate.COLUMNS)
+    assert all(float(r['random_se']) >= 0 for r in rows)
+    table = capsys.readouterr().out
+    assert '| challenge | setting | random | oracle | oracle success |' in table
+
+
+def test_eval_script_rejects_unknown_challenges():
+    with pytest.raises(SystemExit):
+        evaluate.main(['--episodes', '2', '--challenges', 'growing'])
+
+
+def test_bench_script_prints_a_table_and_restores_the_cpu_set(capsys):
+    cpus = os.sched_getaffinity(0)
+    assert bench.main(['--episodes', '1', '--repeats', '1', '--challenges', 'control']) == 0
+    out = capsys.readouterr().out
+    assert '| control |' in out and 'peak RSS' in out
+    assert os.sched_getaffinity(0) == cpus
