@@ -30,6 +30,10 @@ setup(
             'growspace-eval = growspace_sim.evaluate:main',
             'growspace-bench = growspace_sim.bench:main',
             'growspace-demo = growspace_sim.demo:main',
+            'growspace-record = growspace_sim.recorder_cli:main',
+            'growspace-replay = growspace_sim.replay:main',
+            'sim_node = growspace_sim.node.main:main',
+            'teleop = growspace_sim.teleop:main',
         ],
     },
 )

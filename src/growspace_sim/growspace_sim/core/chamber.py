@@ -98,8 +98,7 @@ class Chamber:
             self.target_mask = self._target_mask(target_image)
         self.light = lights.initial_light(cfg, layout.light_x, layout.light_z)
         self._canopy = np.zeros(int(math.ceil(cfg.chamber_width / self._column_width)))  # m
-        self.photons = self._scatter_photons(rng)
-        self._photon_column = self._column_of(self.photons.real)
+        self._keep_photons(self._scatter_photons(rng))
         stem = cfg.width_m(cfg.first_branch_height)
         roots = np.asarray(layout.stem_x, np.complex128)
         self.pos[:n] = roots  # roots have no parent and no segment
@@ -121,8 +120,18 @@ class Chamber:
         if bad.any():
             raise ValueError(f'photon {photons[bad][0]!r} is not inside the chamber '
                              f'[0, {cfg.chamber_width}] x [0, {cfg.chamber_height}] m.')
-        self.photons = photons
-        self._photon_column = self._column_of(photons.real)
+        self._keep_photons(photons)
+
+    def _keep_photons(self, photons: np.ndarray) -> None:
+        """Store photons sorted by x, so the photons of any x range are one slice away."""
+        self.photons = np.sort(photons)  # complex numbers sort by real part first
+        self._photon_x = np.ascontiguousarray(self.photons.real)
+        self._photon_column = self._column_of(self._photon_x)
+
+    def _x_range(self, low: float, high: float) -> slice:
+        """The photons with low <= x <= high."""
+        x = self._photon_x
+        return slice(int(x.searchsorted(low, 'left')), int(x.searchsorted(high, 'right')))
 
     def _scatter_photons(self, rng: np.random.Generator) -> np.ndarray:
         cfg = self.cfg
@@ -155,11 +164,16 @@ class Chamber:
 
     def _grow(self) -> int:
         cfg = self.cfg
-        photons = self.photons
-        lit = self.light.illuminates(photons)
+        light = self.light
+        reach = light.radius if light.spot else 0.5 * light.width
+        span = self._x_range(light.x - reach, light.x + reach)
+        lit_photons = self.photons[span]
         if cfg.shading:
-            lit &= self._canopy[self._photon_column] <= photons.imag
-        lit_photons = photons[lit]
+            lit_photons = lit_photons[self._canopy[self._photon_column[span]]
+                                      <= lit_photons.imag]
+        if light.spot:
+            lit_photons = lit_photons[np.abs(lit_photons - complex(light.x, light.z))
+                                      <= light.radius]
         if lit_photons.size == 0:
             return 0
         n = self.n_nodes
@@ -216,9 +230,13 @@ class Chamber:
 
     def _update_photons(self, a: np.ndarray, b: np.ndarray) -> None:
         """Use up the photons at the new nodes b and raise the canopy over the segments a-b."""
-        alive = np.abs(self.photons[:, None] - b).min(axis=1) >= self._kill
-        if not alive.all():
+        near = self._x_range(b.real.min() - self._kill, b.real.max() + self._kill)
+        used = np.abs(self.photons[near, None] - b).min(axis=1) < self._kill
+        if used.any():
+            alive = np.ones(self.photons.size, bool)
+            alive[near] = ~used
             self.photons = self.photons[alive]
+            self._photon_x = self._photon_x[alive]
             self._photon_column = self._photon_column[alive]
         self._shade(a, b)
 

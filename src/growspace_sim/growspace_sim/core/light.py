@@ -28,12 +28,6 @@ class Light:
     width: float  # m, beam width (unused by the spotlight)
     radius: float  # m, spotlight radius (unused by the beam)
 
-    def illuminates(self, photons: np.ndarray) -> np.ndarray:
-        """Mask of the photons (complex x + iz, m) inside the light, before shading."""
-        if self.spot:
-            return np.abs(photons - complex(self.x, self.z)) <= self.radius
-        return np.abs(photons.real - self.x) <= 0.5 * self.width
-
     def copy(self) -> Light:
         return Light(self.spot, self.x, self.z, self.width, self.radius)
 
@@ -114,7 +108,8 @@ def apply_continuous(light: Light, action: np.ndarray, cfg: SimConfig) -> None:
     values = np.asarray(action, dtype=np.float64).reshape(-1)
     if values.size != size:
         raise ValueError(f'continuous action must have {size} values, got {values.size}.')
-    bad = ~np.isfinite(values) | (np.abs(values) > 1.0)
+    finite = np.isfinite(values)
+    bad = ~finite | (np.abs(np.where(finite, values, 0.0)) > 1.0)  # no NaN comparison warnings
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f'continuous action[{i}] must be finite and in [-1, 1], '

@@ -1,0 +1,354 @@
+"""The chamber node's logic, written once against ``transport.Transport``.
+
+Topics (relative, so a namespace or ``__ns`` remap puts several chambers side by side):
+
+| topic | type | direction | QoS |
+|---|---|---|---|
+| ``light/command`` | growspace_msgs/LightCommand | in | reliable, keep_last 100 |
+| ``reset`` | growspace_msgs/ResetRequest | in | reliable, keep_last 100 |
+| ``camera/image_raw`` | sensor_msgs/Image (rgb8) | out | reliable, keep_last 10 |
+| ``plant/state`` | growspace_msgs/PlantState | out | reliable, keep_last 10 |
+| ``light/state`` | growspace_msgs/LightCommand (absolute, applied) | out | reliable, keep_last 10 |
+| ``step_result`` | growspace_msgs/StepResult (published last) | out | reliable, keep_last 10 |
+| ``/clock`` | rosgraph_msgs/Clock (sim time) | out | reliable, keep_last 1 |
+| ``chamber/config`` | std_msgs/String (JSON) | out | reliable, keep_last 1, latched |
+
+Lockstep: every LightCommand whose step_id is above the last one processed since the latest
+reset is answered by exactly one StepResult with that step_id (after one step, or without a
+step when the command is invalid or the episode is over). Realtime: a timer steps at rate_hz
+with the latest command. Sim time advances 1/rate_hz per step and per reset in both modes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import secrets
+from typing import Any, Protocol
+
+import numpy as np
+
+import growspace_sim
+from growspace_sim import convert
+from growspace_sim.core.chamber import StepOutcome
+from growspace_sim.core.config import SimConfig
+from growspace_sim.node.params import NodeParams, ParamError, as_values, build
+from growspace_sim.node.transport import Transport
+from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.simulation import Simulation
+
+STRING = 'std_msgs/msg/String'
+RESET_SRV = 'growspace_msgs/srv/Reset'
+COMMAND_QOS = ros_qos.QosProfile(depth=100)  # deep enough that a lockstep client never loses one
+OBSERVATION_QOS = ros_qos.QosProfile(depth=10)
+EPISODE_OVER = 'episode over; send a reset'
+FRAMES = ('chamber frame: origin at the left end of the chamber floor, x along the light rail '
+          '[m], z up [m]; images rgb8, row 0 at the top of the chamber')
+
+# (key, relative topic, type, QoS) of every output, in publishing order: step_result last.
+OUTPUTS = (
+    ('clock', '/clock', convert.CLOCK, ros_qos.CLOCK),
+    ('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),
+    ('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
+    ('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
+    ('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
+    ('config', 'chamber/config', STRING, ros_qos.LATCHED),
+)
+INPUTS = (
+    ('reset', 'reset', types.RESET_REQUEST, COMMAND_QOS),
+    ('command', 'light/command', types.LIGHT_COMMAND, COMMAND_QOS),
+)
+
+
+def _apply(sim: Simulation, msg: Any) -> None:
+    # NaN/inf in a float32 action are rejected by apply_command; numpy's cast warning is noise.
+    with np.errstate(invalid='ignore', over='ignore'):
+        convert.apply_command(sim, msg)
+
+
+class Recorder(Protocol):
+    """What the node needs from a recorder (``growspace_sim.recording.McapRecorder``)."""
+
+    def add_channel(self, topic: str, typename: str, qos: ros_qos.QosProfile) -> int: ...
+
+    def write(self, channel: int, cdr: bytes, log_time_ns: int, publish_time_ns: int) -> None: ...
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class ChamberNode:
+    """One simulated chamber on topics.
+
+    Args:
+        transport: the middleware.
+        cfg: the chamber configuration.
+        params: the node settings.
+        recorder: receives every message's CDR bytes, or None.
+        digit_source: where shape targets come from (see ``growspace_sim.digits``).
+    """
+
+    def __init__(self, transport: Transport, cfg: SimConfig, params: NodeParams | None = None,
+                 recorder: Recorder | None = None, digit_source: str = 'auto') -> None:
+        self.transport = transport
+        self.log = transport.logger
+        self.params = params or NodeParams()
+        self.cfg = cfg
+        self.digit_source = digit_source
+        self.recorder = recorder
+        self.sim = Simulation(cfg, digit_source)
+        self.sim_time_ns = 0
+        self.last_step_id = 0
+        self.reset_id = 0
+        self.seed: int | None = None
+        self.episode_over = False
+        self.outcome: StepOutcome | None = None
+        self.pending_cfg: SimConfig | None = None  # valid parameter changes, used at next reset
+        self._latest: Any = None  # realtime: the command the next tick applies
+        self._channels: dict[str, int] = {}
+        self._topics = {key: topic for key, topic, _, _ in OUTPUTS}
+        self._pubs = {key: transport.publisher(typename, topic, qos)
+                      for key, topic, typename, qos in OUTPUTS}
+        self._register_channels()
+        handlers = {'reset': self.on_reset, 'command': self.on_command}
+        for key, topic, typename, qos in INPUTS:
+            transport.subscribe(typename, topic, qos, handlers[key])
+        transport.serve(RESET_SRV, 'reset', self.on_reset_service)
+        if self.params.mode == 'realtime':
+            transport.create_timer(1.0 / self.params.rate_hz, self.tick)
+        seed = self.params.seed if self.params.seed >= 0 else secrets.randbits(63)
+        self._reset(seed, cfg, reset_id=0)
+
+    # --- inputs --------------------------------------------------------------------------
+
+    def on_command(self, msg: Any, cdr: bytes) -> None:
+        """A LightCommand arrived (transport callback)."""
+        self._record('command', cdr)
+        try:
+            if self.params.mode == 'realtime':
+                self._latest = msg  # last wins, whatever its mode; validated at the tick
+            else:
+                self._lockstep(msg)
+        except Exception as e:  # noqa: BLE001 - keep the node alive, say why
+            self.log.warn('command:internal', f'light/command: dropped, internal error '
+                          f'{type(e).__name__}: {e}')
+
+    def on_reset(self, msg: Any, cdr: bytes) -> None:
+        """A ResetRequest arrived (transport callback)."""
+        self._record('reset', cdr)
+        reset_id = int(msg.reset_id)
+        error = self.request_reset(msg, reset_id)
+        if error:
+            self.log.warn(f'reset:{error.split(" ", 1)[0]}', f'reset: rejected reset_id '
+                          f'{reset_id}: {error.rstrip(".")}; the episode goes on unchanged.')
+            self._publish_result(step_id=0, reset_id=reset_id, info=f'error: {error}')
+
+    def on_reset_service(self, request: Any) -> Any:
+        """The ``reset`` service (rclpy mode): same as the topic, the node picks the id."""
+        reset_id = self.reset_id + 1
+        error = self.request_reset(request, reset_id)
+        return types.new(types.RESET_SRV_RESPONSE, success=not error, message=error or '',
+                         reset_id=0 if error else reset_id)
+
+    def request_reset(self, msg: Any, reset_id: int) -> str | None:
+        """Validate and apply a reset request (topic or service form).
+
+        Returns:
+            None on success, else the error text (the state is unchanged then).
+        """
+        try:
+            seed, challenge, setting = convert.reset_args(msg)
+            cfg = self.pending_cfg or self.cfg
+            changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
+            if changes:
+                cfg = cfg.replace(**changes)
+            self._reset(seed, cfg, reset_id)
+        except ValueError as e:
+            return str(e)
+        except Exception as e:  # noqa: BLE001 - e.g. digits that cannot load: say so
+            return f'reset failed: {type(e).__name__}: {e}'
+        return None
+
+    def propose(self, values: dict[str, Any]) -> str | None:
+        """Validate changed parameter values; valid SimConfig changes apply at the next reset.
+
+        Returns:
+            None if accepted, else the reason (names the parameter, value and what is allowed).
+        """
+        current = as_values(self.pending_cfg or self.cfg, self.params)
+        current.update(values)
+        try:
+            cfg, params = build(current)
+        except ParamError as e:
+            return str(e)
+        self.pending_cfg = cfg if cfg != self.cfg else None
+        self.params = dataclasses.replace(self.params, seed=params.seed,
+                                          auto_reset=params.auto_reset)
+        return None
+
+    # --- stepping ------------------------------------------------------------------------
+
+    def _lockstep(self, msg: Any) -> None:
+        step_id = int(msg.step_id)
+        if step_id == 0:
+            self.log.warn('command:step_id', 'light/command: step_id = 0 is not allowed in '
+                          'lockstep mode; expected step_id > the last processed step_id '
+                          f'({self.last_step_id}), or run the node with mode:=realtime.')
+            return
+        if step_id <= self.last_step_id:
+            self.log.warn('command:step_id', f'light/command: step_id = {step_id} dropped: '
+                          f'expected > {self.last_step_id} (duplicate or late command).')
+            return
+        self.last_step_id = step_id
+        if self.episode_over:
+            self.log.warn('command:episode', f'light/command: step_id {step_id} not stepped: '
+                          f'{EPISODE_OVER}.')
+            self._publish_result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
+            return
+        try:
+            _apply(self.sim, msg)
+        except ValueError as e:
+            field = str(e).split(' ', 1)[0]
+            self.log.warn(f'command:{field}', f'light/command: step_id {step_id} not stepped: '
+                          f'{e}')
+            self._publish_result(step_id, self.reset_id, info=f'error: {e}')
+            return
+        self._step(step_id)
+
+    def tick(self) -> None:
+        """Realtime mode: one timer period (a step, or an automatic reset after an episode)."""
+        if self.episode_over:
+            if self.params.auto_reset:
+                self._reset(None, self.pending_cfg or self.cfg, self.reset_id)
+            return
+        msg, self._latest = self._latest, None
+        info = ''
+        if msg is not None:
+            try:
+                _apply(self.sim, msg)
+            except ValueError as e:
+                field = str(e).split(' ', 1)[0]
+                self.log.warn(f'command:{field}', f'light/command: ignored, the light stays: '
+                              f'{e}')
+                info = f'error: {e}'
+        self._step(0, info)
+
+    def _step(self, step_id: int, info: str = '') -> None:
+        self.outcome = self.sim.step()
+        self.episode_over = self.outcome.truncated
+        self.sim_time_ns += self.params.period_ns
+        self._publish_observation(step_id, info)
+
+    def _reset(self, seed: int | None, cfg: SimConfig, reset_id: int) -> None:
+        """Begin an episode; raises ValueError before changing anything if ``cfg`` is bad."""
+        if cfg != self.cfg:
+            sim = Simulation(cfg, self.digit_source)
+            sim.rng = self.sim.rng  # without a seed, continue the random stream
+            sim.seed = self.sim.seed
+            self.sim, self.cfg = sim, cfg
+        self.pending_cfg = None
+        self.outcome = self.sim.reset(seed=seed)
+        self.seed = self.sim.seed
+        self.reset_id = reset_id
+        self.last_step_id = 0  # a reset is the lockstep sync point: ids count from 1 again
+        self.episode_over = False
+        self._latest = None
+        self.sim_time_ns += self.params.period_ns
+        self._publish_config()
+        self._publish_observation(0, '')
+
+    # --- outputs -------------------------------------------------------------------------
+
+    def config_dict(self) -> dict[str, Any]:
+        """The effective configuration, as published on ``chamber/config``."""
+        return {
+            'config': as_values(self.cfg, self.params), 'seed': self.seed,
+            'episode': self.sim.episode, 'reset_id': self.reset_id,
+            'version': growspace_sim.__version__, 'chamber_width_m': self.cfg.chamber_width,
+            'chamber_height_m': self.cfg.chamber_height, 'frames': FRAMES,
+        }
+
+    def _publish_config(self) -> None:
+        text = json.dumps(self.config_dict(), sort_keys=True)
+        self._publish('config', types.new(STRING, data=text))
+        if self.recorder is not None:
+            meta = {'config': text, 'seed': str(self.seed), 'version': growspace_sim.__version__,
+                    'chamber_width_m': repr(self.cfg.chamber_width),
+                    'chamber_height_m': repr(self.cfg.chamber_height),
+                    'frame_conventions': FRAMES, 'reset_id': str(self.reset_id),
+                    'episode': str(self.sim.episode)}
+            self._guard_recorder(lambda: self.recorder.add_metadata('growspace', meta))
+
+    def _publish_observation(self, step_id: int, info: str) -> None:
+        stamp, p = self.sim_time_ns, self.params
+        chamber = self.sim.chamber
+        # Outputs nobody reads (and no recorder wants) are not built: a lockstep RL client
+        # reading images and results only saves three serialisations and writes per step.
+        if self._wanted('clock'):
+            self._publish('clock', convert.clock_msg(stamp))
+        if self._wanted('image'):
+            self._publish('image', convert.image_msg(self.sim.observe(), stamp,
+                                                     p.image_frame_id))
+        if self._wanted('plant'):
+            self._publish('plant', convert.plant_state_msg(chamber, step_id, stamp, p.frame_id))
+        if self._wanted('light'):
+            self._publish('light', convert.light_msg(chamber.light, step_id, stamp, p.frame_id))
+        self._publish_result(step_id, self.reset_id, info=info, outcome=self.outcome)
+
+    def _wanted(self, key: str) -> bool:
+        return key in self._channels or self.transport.has_subscribers(self._topics[key])
+
+    def _publish_result(self, step_id: int, reset_id: int, info: str,
+                        outcome: StepOutcome | None = None, truncated: bool = False) -> None:
+        """A StepResult; without ``outcome`` (nothing was stepped) the reward is 0."""
+        if outcome is None:
+            n = self.cfg.plant_count
+            outcome = StepOutcome(0.0, np.zeros(n), False, truncated or self.episode_over, 0)
+        elif not math.isfinite(outcome.reward) or not np.isfinite(outcome.plant_rewards).all():
+            self.log.warn('result:reward', f'step_result: non-finite reward {outcome.reward!r} '
+                          f'replaced by 0.0 (never published as NaN).')
+            outcome = dataclasses.replace(
+                outcome, reward=0.0, plant_rewards=np.nan_to_num(outcome.plant_rewards, nan=0.0,
+                                                                 posinf=0.0, neginf=0.0))
+        self._publish('result', convert.step_result_msg(
+            outcome, step_id=step_id, reset_id=reset_id, step=self.sim.chamber.steps,
+            stamp_ns=self.sim_time_ns, frame_id=self.params.frame_id, info=info))
+
+    def _publish(self, key: str, msg: Any) -> None:
+        cdr = self._pubs[key](msg)
+        self._record(key, cdr)
+
+    # --- recording -----------------------------------------------------------------------
+
+    def _register_channels(self) -> None:
+        if self.recorder is None:
+            return
+        for key, topic, typename, qos in (*OUTPUTS, *INPUTS):
+            name = self.transport.resolve(topic)
+            self._guard_recorder(lambda: self._channels.__setitem__(
+                key, self.recorder.add_channel(name, typename, qos)))
+
+    def _record(self, key: str, cdr: bytes) -> None:
+        channel = self._channels.get(key)
+        if channel is not None:
+            stamp = self.sim_time_ns
+            self._guard_recorder(lambda: self.recorder.write(channel, cdr, stamp, stamp))
+
+    def _guard_recorder(self, action: Any) -> None:
+        try:
+            action()
+        except Exception as e:  # noqa: BLE001 - a full disk must not stop the chamber
+            self.log.warn('recorder', f'recorder failed, message not recorded: '
+                          f'{type(e).__name__}: {e}')
+
+    def close(self) -> None:
+        """Finish the recording (if any). Idempotent."""
+        recorder, self.recorder = self.recorder, None
+        self._channels.clear()
+        if recorder is not None:
+            try:
+                recorder.close()
+            except Exception as e:  # noqa: BLE001 - shutting down goes on
+                self.log.warn('recorder', f'recorder close failed: {type(e).__name__}: {e}')

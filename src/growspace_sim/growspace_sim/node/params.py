@@ -1,0 +1,314 @@
+"""The node's parameters: every ``SimConfig`` field plus a few node settings, and their parsing.
+
+The names, defaults and types come from ``SimConfig`` and ``NodeParams`` alone; the descriptions
+(with units) are the trailing comments of their fields, read from the source, so the ROS
+parameter descriptors and ``config/growspace.yaml`` cannot drift from the dataclasses.
+
+Without rclpy, ``parse_ros_args`` understands the subset of the ROS command line that
+``ros2 run`` and launch files use for this node: ``--ros-args``, ``-p name:=value``,
+``--params-file FILE``, ``-r __ns:=/ns`` and ``-r __node:=name`` (values are YAML, as in ROS).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+import functools
+import inspect
+import math
+from pathlib import Path
+import re
+from typing import Any, Sequence
+
+import yaml
+
+from growspace_sim.convert import MAX_SEED
+from growspace_sim.core.config import SimConfig
+
+MODES = ('lockstep', 'realtime')
+DEFAULT_NODE_NAME = 'growspace_sim'
+MAX_RATE_HZ = 10_000.0
+
+
+class ParamError(ValueError):
+    """An invalid parameter; the message names it, its value and what is allowed."""
+
+
+@dataclass(frozen=True)
+class NodeParams:
+    """Settings of the node itself (not of the simulated chamber), validated on construction."""
+
+    mode: str = 'lockstep'  # lockstep: one step per LightCommand; realtime: step on a timer
+    rate_hz: float = 10.0  # Hz; timer rate in realtime mode; sim time advances 1/rate_hz a step
+    seed: int = -1  # seed of the first episode; -1 = draw one at random (it is published)
+    auto_reset: bool = True  # realtime mode: start a new episode when one ends
+    frame_id: str = 'chamber'  # frame of plant state, light state and step results
+    image_frame_id: str = 'chamber_camera'  # frame of the camera images
+    record_path: str = ''  # MCAP file to record every message to; empty = no recording
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
+        if isinstance(self.rate_hz, bool) or not isinstance(self.rate_hz, (int, float)) \
+                or not math.isfinite(self.rate_hz) or not 0 < self.rate_hz <= MAX_RATE_HZ:
+            raise ParamError(f'rate_hz must be a number in ]0, {MAX_RATE_HZ}], '
+                             f'got {self.rate_hz!r}.')
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
+                or not -1 <= self.seed <= MAX_SEED:
+            raise ParamError(f'seed must be -1 (random) or an int in [0, {MAX_SEED}], '
+                             f'got {self.seed!r}.')
+        if not isinstance(self.auto_reset, bool):
+            raise ParamError(f'auto_reset must be a bool, got {self.auto_reset!r}.')
+        for name in ('frame_id', 'image_frame_id'):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not re.fullmatch(r'[A-Za-z0-9_/]+', value):
+                raise ParamError(f'{name} must be a non-empty frame name of letters, digits, '
+                                 f'_ and /, got {value!r}.')
+        if not isinstance(self.record_path, str):
+            raise ParamError(f'record_path must be a string, got {self.record_path!r}.')
+
+    @property
+    def period_ns(self) -> int:
+        """Sim time of one step [ns]."""
+        return max(1, round(1e9 / self.rate_hz))
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One ROS parameter: its name, default, and description (with unit)."""
+
+    name: str
+    default: Any
+    description: str
+    owner: type  # SimConfig or NodeParams
+
+
+@functools.cache
+def _field_comments(cls: type) -> dict[str, str]:
+    # 'name: type = default  # comment' lines of the dataclass body.
+    pattern = re.compile(r'^\s+(\w+):[^=]+=[^#]*#\s*(.+)$')
+    found: dict[str, str] = {}
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):  # no source installed: descriptions stay empty
+        return found
+    for line in source.splitlines():
+        match = pattern.match(line)
+        if match:
+            found[match.group(1)] = match.group(2).strip()
+    return found
+
+
+@functools.cache
+def specs() -> tuple[ParamSpec, ...]:
+    """Every parameter of the node: SimConfig fields first, then NodeParams, in field order."""
+    out = []
+    for cls in (SimConfig, NodeParams):
+        comments = _field_comments(cls)
+        for field in dataclasses.fields(cls):
+            out.append(ParamSpec(field.name, field.default, comments.get(field.name, ''), cls))
+    return tuple(out)
+
+
+def defaults() -> dict[str, Any]:
+    """Default value of every parameter, tuples as lists (their ROS form)."""
+    return {s.name: list(s.default) if isinstance(s.default, tuple) else s.default
+            for s in specs()}
+
+
+def _check_type(spec: ParamSpec, value: Any) -> Any:
+    """Coerce a YAML value to the parameter's type as ROS would, or raise ParamError."""
+    default = spec.default
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+        expected = 'a bool (true or false)'
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        expected = 'an integer'
+    elif isinstance(default, float):
+        # ROS would refuse an integer for a double; being lenient here costs nothing.
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+        expected = 'a number'
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+        expected = 'a string'
+    else:  # the digits tuple
+        ok = isinstance(value, (list, tuple)) and all(
+            isinstance(v, int) and not isinstance(v, bool) for v in value)
+        value = tuple(value) if ok else value
+        expected = 'a list of integers'
+    if not ok:
+        raise ParamError(f'{spec.name} must be {expected}, got {value!r}.')
+    return value
+
+
+def build(values: dict[str, Any]) -> tuple[SimConfig, NodeParams]:
+    """Validate parameter values (missing ones get their defaults).
+
+    Args:
+        values: parameter name -> value as parsed from YAML or declared in rclpy.
+
+    Returns:
+        The chamber configuration and the node settings.
+
+    Raises:
+        ParamError: one line naming the parameter, its value and what is allowed.
+    """
+    by_name = {s.name: s for s in specs()}
+    unknown = sorted(set(values) - set(by_name))
+    if unknown:
+        raise ParamError(f'unknown parameter(s) {unknown}; allowed: {sorted(by_name)}.')
+    sim_values: dict[str, Any] = {}
+    node_values: dict[str, Any] = {}
+    for name, value in values.items():
+        spec = by_name[name]
+        target = sim_values if spec.owner is SimConfig else node_values
+        target[name] = _check_type(spec, value)
+    try:
+        cfg = SimConfig.from_dict(sim_values)
+        node = NodeParams(**node_values)
+    except ValueError as e:
+        raise ParamError(str(e)) from None
+    return cfg, node
+
+
+def as_values(cfg: SimConfig, node: NodeParams) -> dict[str, Any]:
+    """The parameter values of a configuration (the inverse of ``build``), tuples as lists."""
+    out = {}
+    for obj in (cfg, node):
+        for field in dataclasses.fields(obj):
+            value = getattr(obj, field.name)
+            out[field.name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+@dataclass
+class RosArgs:
+    """What ``parse_ros_args`` found on a command line."""
+
+    params: dict[str, Any]
+    node_name: str = DEFAULT_NODE_NAME
+    namespace: str = '/'
+    rest: list[str] = dataclasses.field(default_factory=list)  # the non-ROS arguments
+
+
+def _param_sections(doc: Any, node_name: str, namespace: str, path: str) -> dict[str, Any]:
+    if not isinstance(doc, dict):
+        raise ParamError(f'params file {path}: expected a mapping of node names, got {doc!r}.')
+    fq_name = namespace.rstrip('/') + '/' + node_name
+    wanted = {'/**', '**', node_name, '/' + node_name, fq_name, '/**/' + node_name}
+    merged: dict[str, Any] = {}
+    for key, section in doc.items():
+        if str(key) not in wanted:
+            continue
+        if not isinstance(section, dict) or 'ros__parameters' not in section:
+            raise ParamError(f'params file {path}: section {key!r} has no ros__parameters.')
+        merged.update(_flatten(section['ros__parameters'] or {}))
+    return merged
+
+
+def _flatten(tree: dict[str, Any], prefix: str = '') -> dict[str, Any]:
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f'{prefix}{key}.'))
+        else:
+            out[f'{prefix}{key}'] = value
+    return out
+
+
+def load_params_file(path: str | Path, node_name: str = DEFAULT_NODE_NAME,
+                     namespace: str = '/') -> dict[str, Any]:
+    """Read the parameters meant for this node from a ROS params file (``/**:`` etc.).
+
+    Raises:
+        ParamError: the file cannot be read or is not a ROS params file.
+    """
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise ParamError(f'params file {path}: {e}') from None
+    return _param_sections(doc or {}, node_name, namespace, str(path))
+
+
+def _split_assignment(text: str, flag: str) -> tuple[str, str]:
+    name, sep, value = text.partition(':=')
+    if not sep or not name:
+        raise ParamError(f'{flag} expects name:=value, got {text!r}.')
+    return name, value
+
+
+def parse_ros_args(argv: Sequence[str]) -> RosArgs:
+    """Parse the ROS arguments of a command line (everything after ``--ros-args``).
+
+    Params files are applied first (in order), then ``-p`` values, as rcl does.
+
+    Raises:
+        ParamError: an argument this parser does not support, or a bad params file.
+    """
+    argv = list(argv)
+    rest: list[str] = []
+    files: list[str] = []
+    overrides: dict[str, Any] = {}
+    node_name, namespace = DEFAULT_NODE_NAME, '/'
+    in_ros = False
+    i = 0
+    while i < len(argv):
+        arg = argv[i]
+        i += 1
+        if arg == '--ros-args':
+            in_ros = True
+            continue
+        if not in_ros:
+            rest.append(arg)
+            continue
+        if arg == '--':
+            in_ros = False
+            continue
+        if arg in ('-p', '--param', '--params-file', '-r', '--remap', '--log-level'):
+            if i >= len(argv):
+                raise ParamError(f'{arg} needs a value.')
+            value = argv[i]
+            i += 1
+            if arg in ('-p', '--param'):
+                name, text = _split_assignment(value, arg)
+                try:
+                    overrides[name] = yaml.safe_load(text) if text else ''
+                except yaml.YAMLError:
+                    overrides[name] = text
+            elif arg == '--params-file':
+                files.append(value)
+            elif arg in ('-r', '--remap'):
+                name, text = _split_assignment(value, arg)
+                if name == '__ns':
+                    namespace = text
+                elif name == '__node':
+                    node_name = text
+                else:
+                    raise ParamError(f'remapping {value!r} is not supported without rclpy; '
+                                     f'only __ns:=/namespace and __node:=name are.')
+            continue  # --log-level is accepted and ignored
+        raise ParamError(f'ROS argument {arg!r} is not supported without rclpy; supported: '
+                         f'-p name:=value, --params-file FILE, -r __ns:=/ns, -r __node:=name.')
+    params: dict[str, Any] = {}
+    for path in files:
+        params.update(load_params_file(path, node_name, namespace))
+    params.update(overrides)
+    return RosArgs(params, node_name, namespace, rest)
+
+
+def to_yaml(values: dict[str, Any] | None = None, node_name: str = '/**') -> str:
+    """A ROS params file of every parameter, with each description as a comment."""
+    values = defaults() if values is None else values
+    lines = [f'{node_name}:', '  ros__parameters:']
+    for spec in specs():
+        value = values[spec.name]
+        text = yaml.safe_dump(value, default_flow_style=True).strip()
+        if text.endswith('\n...') or text.endswith('...'):
+            text = text.rsplit('\n', 1)[0]
+        if isinstance(value, float):
+            text = repr(value)  # 0.0-style, so ROS types it as a double
+        comment = f'  # {spec.description}' if spec.description else ''
+        lines.append(f'    {spec.name}: {text}{comment}')
+    return '\n'.join(lines) + '\n'

@@ -1,0 +1,54 @@
+"""One-shot publisher without ROS: the equivalent of ``ros2 topic pub --once``.
+
+Example (the same YAML value as the ``ros2`` command line)::
+
+    python -m growspace_sim.node.pub /light/command growspace_msgs/msg/LightCommand \\
+        "{mode: 0, x: 0.3, width: 0.1}"
+
+Waits until a subscriber matched (up to ``--wait`` seconds), publishes once with the node's
+command QoS (reliable), and waits for the acknowledgement, so the message is not lost on exit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+import yaml
+
+from growspace_sim.node.chamber_node import COMMAND_QOS
+from growspace_sim.ros import types
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m growspace_sim.node.pub',
+                                     description=__doc__.split('\n', 1)[0])
+    parser.add_argument('topic', help='topic name, e.g. /light/command or /chamber1/reset')
+    parser.add_argument('type', help='message type, e.g. growspace_msgs/msg/LightCommand')
+    parser.add_argument('values', nargs='?', default='{}', help='YAML mapping of field values')
+    parser.add_argument('--wait', type=float, default=5.0, help='seconds to wait for a reader')
+    args = parser.parse_args(argv)
+    try:
+        values = yaml.safe_load(args.values) or {}
+        if not isinstance(values, dict):
+            raise ValueError(f'values must be a YAML mapping, got {args.values!r}')
+        msg = types.from_plain(args.type, values)
+    except (ValueError, TypeError, KeyError, yaml.YAMLError) as e:
+        print(f'pub: {e}', file=sys.stderr)
+        return 2
+    from growspace_sim.ros import dds
+
+    with dds.DdsContext('growspace_pub') as ctx:
+        pub = ctx.create_publisher(args.type, args.topic, COMMAND_QOS)
+        if not pub.wait_for_subscribers(1, args.wait):
+            print(f'pub: no subscriber on {pub.topic} after {args.wait} s; publishing anyway',
+                  file=sys.stderr)
+        pub.publish(msg)
+        pub.wait_for_acks(args.wait)
+    print(f'published on {pub.topic}: {types.to_plain(msg)}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,168 @@
+"""Keyboard teleop for a chamber: arrow keys move the light, +/- resize it, r resets.
+
+Publishes ``LightCommand`` MODE_DISCRETE on ``light/command`` through the same transport as the
+node (rclpy when importable, else Cyclone DDS). In lockstep mode it sends the last step_id seen
+on ``step_result`` + 1; in realtime mode step_id 0. The mode and light kind come from the
+node's latched ``chamber/config`` and from ``light/state``.
+
+Usage: ``ros2 run growspace_sim teleop --ros-args -r __ns:=/chamber1`` or
+``python -m growspace_sim.teleop --ros-args -r __ns:=/chamber1``.
+"""
+
+from __future__ import annotations
+
+import curses
+import json
+import os
+import secrets
+import sys
+from typing import Any, Sequence
+
+from growspace_sim import convert
+from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
+from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
+from growspace_sim.node.params import parse_ros_args
+from growspace_sim.ros import qos as ros_qos, types
+
+QUIT, RESET = 'quit', 'reset'
+HELP = ('arrows: move (up/down: spotlight)   +/-: wider/narrower (bigger/smaller)   '
+        'space: stay   r: reset   q: quit')
+_NAMED_KEYS = {curses.KEY_LEFT: 'left', curses.KEY_RIGHT: 'right', curses.KEY_UP: 'up',
+               curses.KEY_DOWN: 'down'}
+_CHAR_KEYS = {'+': 'grow', '=': 'grow', '-': 'shrink', '_': 'shrink', ' ': 'stay',
+              'r': RESET, 'R': RESET, 'q': QUIT, 'Q': QUIT}
+
+
+def key_to_command(key: int | str, spot: bool) -> int | str | None:
+    """Map a key to a discrete action index of the light, RESET, QUIT, or None (ignored).
+
+    Args:
+        key: a curses key code (``curses.KEY_LEFT``...) or a one-character string.
+        spot: True for the spotlight (shape challenge), False for the beam.
+    """
+    if isinstance(key, int):
+        name = _NAMED_KEYS.get(key) or (_CHAR_KEYS.get(chr(key)) if 0 <= key < 256 else None)
+    else:
+        name = _CHAR_KEYS.get(key)
+    if name in (QUIT, RESET) or name is None:
+        return name
+    actions = SPOT_ACTIONS if spot else BEAM_ACTIONS
+    name = {'grow': 'bigger' if spot else 'wider',
+            'shrink': 'smaller' if spot else 'narrower'}.get(name, name)
+    return actions.index(name) if name in actions else None
+
+
+class Teleop:
+    """The state of a teleop session, independent of the screen (tested without curses)."""
+
+    def __init__(self, transport: Any) -> None:
+        self.transport = transport
+        self.send_command = transport.publisher(types.LIGHT_COMMAND, 'light/command',
+                                                COMMAND_QOS)
+        self.send_reset = transport.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
+        transport.subscribe(types.STEP_RESULT, 'step_result', OBSERVATION_QOS, self._on_result)
+        transport.subscribe(types.LIGHT_COMMAND, 'light/state', OBSERVATION_QOS, self._on_light)
+        transport.subscribe('std_msgs/msg/String', 'chamber/config', ros_qos.LATCHED,
+                            self._on_config)
+        self.last_step_id = 0
+        self.last_result: Any = None
+        self.spot = False
+        self.mode = 'lockstep'
+        self.status = 'waiting for the node...'
+
+    def _on_result(self, msg: Any, _: bytes) -> None:
+        self.last_result = msg
+        self.last_step_id = int(msg.step_id)
+
+    def _on_light(self, msg: Any, _: bytes) -> None:
+        self.spot = int(msg.mode) == convert.MODE_SPOT
+
+    def _on_config(self, msg: Any, _: bytes) -> None:
+        try:
+            config = json.loads(msg.data)['config']
+            self.mode = config['mode']
+            self.spot = config['challenge'] == 'shape'
+        except (ValueError, KeyError, TypeError):
+            pass
+
+    def press(self, key: int | str) -> bool:
+        """Handle a key; returns False when the user quits."""
+        command = key_to_command(key, self.spot)
+        if command == QUIT:
+            return False
+        if command == RESET:
+            self.send_reset(types.new(types.RESET_REQUEST, reset_id=secrets.randbits(32)))
+            self.status = 'reset sent'
+        elif command is not None:
+            step_id = self.last_step_id + 1 if self.mode == 'lockstep' else 0
+            self.send_command(types.new(types.LIGHT_COMMAND, step_id=step_id,
+                                        mode=convert.MODE_DISCRETE, action=command))
+            names = SPOT_ACTIONS if self.spot else BEAM_ACTIONS
+            self.status = f'sent {names[command]} (step_id {step_id})'
+        return True
+
+    def lines(self) -> list[str]:
+        result = self.last_result
+        shown = ('no step_result yet (is the node running in this namespace?)' if result is None
+                 else f'step {result.step}  step_id {result.step_id}  reward '
+                      f'{result.reward:.4f}  truncated {result.truncated}  {result.info}')
+        light = 'spotlight' if self.spot else 'beam'
+        return [f'GrowSpace teleop: {self.transport.resolve("light/command")} '
+                f'({self.mode}, {light})', HELP, shown, self.status]
+
+
+def _loop(screen: Any, teleop: Teleop) -> None:
+    curses.curs_set(0)
+    screen.timeout(50)  # ms; keeps the screen fresh while messages arrive
+    while True:
+        teleop.transport.spin_once(0.0)
+        screen.erase()
+        for row, line in enumerate(teleop.lines()):
+            screen.addnstr(row, 0, line, max(1, curses.COLS - 1))
+        screen.refresh()
+        key = screen.getch()
+        if key != -1 and not teleop.press(key):
+            return
+
+
+def make_transport(node_name: str, namespace: str) -> Any:
+    """rclpy transport when available (or GROWSPACE_TRANSPORT=rclpy), else Cyclone DDS."""
+    from growspace_sim.node.main import choose_transport
+
+    if choose_transport() == 'rclpy':
+        import rclpy
+
+        from growspace_sim.node.rclpy_transport import RclpyTransport
+
+        rclpy.init()
+        return RclpyTransport(node_name, namespace)
+    from growspace_sim.node.transport import DdsTransport
+
+    return DdsTransport(node_name, namespace)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``teleop``."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        ros_args = parse_ros_args(argv)
+        transport = make_transport('growspace_teleop', ros_args.namespace)
+    except ValueError as e:
+        print(f'teleop: {e}', file=sys.stderr)
+        return 2
+    try:
+        curses.wrapper(_loop, Teleop(transport))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        transport.close()
+        if 'rclpy' in sys.modules and os.environ.get('GROWSPACE_TRANSPORT') != 'dds':
+            import rclpy
+
+            rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
+

@@ -1,0 +1,138 @@
+"""Keyboard teleop: the key mapping, the session logic on a fake, and a pty-driven smoke test."""
+
+from __future__ import annotations
+
+import curses
+import json
+import os
+import pty
+import select
+import signal
+import sys
+import time
+
+import pytest
+
+from growspace_sim import convert
+from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
+from growspace_sim.core.config import SimConfig
+from growspace_sim.node.chamber_node import ChamberNode
+from growspace_sim.node.fake import FakeTransport
+from growspace_sim.node.params import NodeParams
+from growspace_sim.ros import dds, types
+from growspace_sim.teleop import QUIT, RESET, Teleop, key_to_command
+from test_node_dds import NodeProcess, loopback_env  # noqa: F401
+
+
+@pytest.mark.parametrize(('key', 'spot', 'name'), [
+    (curses.KEY_LEFT, False, 'left'), (curses.KEY_RIGHT, False, 'right'),
+    (ord('+'), False, 'wider'), ('=', False, 'wider'), ('-', False, 'narrower'),
+    (' ', False, 'stay'), (curses.KEY_UP, True, 'up'), (curses.KEY_DOWN, True, 'down'),
+    ('+', True, 'bigger'), (ord('-'), True, 'smaller'), (' ', True, 'stay'),
+    (curses.KEY_LEFT, True, 'left'),
+])
+def test_keys_map_to_the_lights_actions(key: object, spot: bool, name: str) -> None:
+    actions = SPOT_ACTIONS if spot else BEAM_ACTIONS
+    assert key_to_command(key, spot) == actions.index(name)
+
+
+def test_special_and_unknown_keys() -> None:
+    assert key_to_command('r', False) == RESET and key_to_command(ord('q'), True) == QUIT
+    assert key_to_command(curses.KEY_UP, False) is None  # a beam cannot move up
+    assert key_to_command('x', False) is None and key_to_command(curses.KEY_F1, True) is None
+    assert key_to_command(-1, False) is None
+
+
+def test_teleop_follows_step_ids_mode_and_light_kind() -> None:
+    transport = FakeTransport()
+    node = ChamberNode(transport, SimConfig(), NodeParams(seed=1))
+    teleop = Teleop(transport)
+
+    # The fake does not loop published messages back: hand the node's outputs to teleop.
+    def relay() -> None:
+        for topic, handler in (('step_result', teleop._on_result),
+                               ('light/state', teleop._on_light),
+                               ('chamber/config', teleop._on_config)):
+            for msg, cdr in transport.published[transport.resolve(topic)]:
+                handler(msg, cdr)
+        transport.clear()
+    relay()
+    for key in (curses.KEY_RIGHT, curses.KEY_RIGHT, ord('+')):
+        assert teleop.press(key)
+        msg, cdr = transport.published[transport.resolve('light/command')][-1]
+        transport.inject_raw('light/command', cdr)
+        relay()
+    assert teleop.last_step_id == 3 and teleop.last_result.step == 3
+    assert teleop.press('r')
+    msg, cdr = transport.published[transport.resolve('reset')][-1]
+    transport.inject_raw('reset', cdr)
+    relay()
+    assert teleop.last_step_id == 0 and teleop.last_result.step == 0
+    transport.inject('reset', types.new(types.RESET_REQUEST, reset_id=2, challenge='shape'))
+    relay()
+    assert teleop.spot and teleop.press(curses.KEY_UP)
+    assert transport.published[transport.resolve('light/command')][-1][0].action == \
+        SPOT_ACTIONS.index('up')
+    teleop._on_config(types.new('std_msgs/msg/String', data=json.dumps(
+        {'config': {'mode': 'realtime', 'challenge': 'control'}})), b'')
+    teleop.press(' ')
+    last = transport.published[transport.resolve('light/command')][-1][0]
+    assert last.step_id == 0 and last.mode == convert.MODE_DISCRETE
+    assert not teleop.press('q')
+    assert teleop.lines()[2].startswith('step 0  step_id 0')
+
+
+def _read_until(fd: int, needle: bytes, timeout: float) -> bytes:
+    out = b''
+    deadline = time.monotonic() + timeout
+    while needle not in out and time.monotonic() < deadline:
+        ready, _, _ = select.select([fd], [], [], 0.1)
+        if ready:
+            try:
+                out += os.read(fd, 65536)
+            except OSError:
+                break
+    return out
+
+
+def test_teleop_in_a_terminal_drives_the_node() -> None:
+    namespace = '/teleop_smoke'
+    node = NodeProcess('-p', 'seed:=2', namespace=namespace)
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: teleop on a pseudo terminal
+        os.environ['TERM'] = 'xterm'
+        os.execv(sys.executable, [sys.executable, '-m', 'growspace_sim.teleop', '--ros-args',
+                                  '-r', f'__ns:={namespace}'])
+    try:
+        with dds.DdsContext('observer', namespace) as ctx:
+            results = ctx.create_subscription(types.STEP_RESULT, 'step_result')
+            assert results.wait_for_publishers(1, 20.0)
+            screen = _read_until(fd, b'GrowSpace teleop', 20.0)
+            assert b'GrowSpace teleop' in screen, screen
+            time.sleep(1.0)  # let teleop's endpoints match the node's
+            step_ids = []
+            for expected in (1, 2):
+                # Right arrow as xterm sends it in keypad (application) mode, which curses sets.
+                os.write(fd, b'\x1bOC')
+                deadline = time.monotonic() + 10.0
+                while time.monotonic() < deadline and len(step_ids) < expected:
+                    results.wait(0.2)
+                    step_ids += [m.step_id for _, m in results.take() if m.step_id]
+                    _read_until(fd, b'\0', 0.01)  # keep the pty drained
+            assert step_ids == [1, 2]
+            os.write(fd, b'q')
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline:
+                done, status = os.waitpid(pid, os.WNOHANG)
+                if done:
+                    break
+                _read_until(fd, b'\0', 0.1)
+            assert done and os.waitstatus_to_exitcode(status) == 0
+            pid = 0
+    finally:
+        if pid:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        os.close(fd)
+        code, err = node.stop()
+    assert code == 0, err
