@@ -12,7 +12,9 @@ plant's top over columns one branch thickness wide; a photon below it is in the 
 
 Positions are complex numbers ``x + 1j * z`` in metres: one array holds a 2-D point set, ``abs``
 is the Euclidean distance, and vector sums stay one operation. Arrays are preallocated for the
-whole episode so a step only appends.
+whole episode so a step only appends. Photons never move and nodes are only added, so each
+photon keeps its nearest node and that distance, updated against the new nodes only: a step
+costs (photons x new nodes) instead of (lit photons x all nodes).
 """
 
 from __future__ import annotations
@@ -98,13 +100,12 @@ class Chamber:
             self.target_mask = self._target_mask(target_image)
         self.light = lights.initial_light(cfg, layout.light_x, layout.light_z)
         self._canopy = np.zeros(int(math.ceil(cfg.chamber_width / self._column_width)))  # m
-        self._keep_photons(self._scatter_photons(rng))
-        stem = cfg.width_m(cfg.first_branch_height)
         roots = np.asarray(layout.stem_x, np.complex128)
         self.pos[:n] = roots  # roots have no parent and no segment
         self.plant[:n] = np.arange(n)
         self.n_nodes = n
-        self._append(roots + 1j * stem, np.arange(n))
+        self._keep_photons(self._scatter_photons(rng))
+        self._append(roots + 1j * cfg.width_m(cfg.first_branch_height), np.arange(n))
         self.steps = 0
 
     def set_photons(self, photons: np.ndarray) -> None:
@@ -123,10 +124,14 @@ class Chamber:
         self._keep_photons(photons)
 
     def _keep_photons(self, photons: np.ndarray) -> None:
-        """Store photons sorted by x, so the photons of any x range are one slice away."""
+        """Store photons sorted by x (the photons of an x range are one slice) with their
+        nearest node, which then only changes when a node grows closer."""
         self.photons = np.sort(photons)  # complex numbers sort by real part first
         self._photon_x = np.ascontiguousarray(self.photons.real)
         self._photon_column = self._column_of(self._photon_x)
+        distances = np.abs(self.photons[:, None] - self.pos[:self.n_nodes])
+        self._nearest_node = distances.argmin(axis=1)  # ties go to the older node
+        self._nearest_distance = distances[np.arange(self.photons.size), self._nearest_node]
 
     def _x_range(self, low: float, high: float) -> slice:
         """The photons with low <= x <= high."""
@@ -163,31 +168,20 @@ class Chamber:
         return self._outcome(grown)
 
     def _grow(self) -> int:
-        cfg = self.cfg
-        light = self.light
-        reach = light.radius if light.spot else 0.5 * light.width
-        span = self._x_range(light.x - reach, light.x + reach)
-        lit_photons = self.photons[span]
+        cfg, light = self.cfg, self.light
+        half_span = light.radius if light.spot else 0.5 * light.width
+        span = self._x_range(light.x - half_span, light.x + half_span)
+        photons, distance = self.photons[span], self._nearest_distance[span]
+        attracting = distance < self._influence  # its nearest node is within reach
         if cfg.shading:
-            lit_photons = lit_photons[self._canopy[self._photon_column[span]]
-                                      <= lit_photons.imag]
+            attracting &= self._canopy[self._photon_column[span]] <= photons.imag
         if light.spot:
-            lit_photons = lit_photons[np.abs(lit_photons - complex(light.x, light.z))
-                                      <= light.radius]
-        if lit_photons.size == 0:
+            attracting &= np.abs(photons - complex(light.x, light.z)) <= light.radius
+        if not attracting.any():
             return 0
-        n = self.n_nodes
-        offsets = lit_photons[:, None] - self.pos[:n]  # (lit photons, nodes)
-        distances = np.abs(offsets)
-        nearest = distances.argmin(axis=1)
-        rows = np.arange(lit_photons.size)
-        closest = distances[rows, nearest]
-        reach = closest < self._influence
-        if not reach.any():
-            return 0
-        nearest = nearest[reach]
-        pull = np.zeros(n, np.complex128)
-        np.add.at(pull, nearest, offsets[rows[reach], nearest] / closest[reach])
+        nodes = self._nearest_node[span][attracting]
+        pull = np.zeros(self.n_nodes, np.complex128)  # per node: sum of unit vectors
+        np.add.at(pull, nodes, (photons[attracting] - self.pos[nodes]) / distance[attracting])
         strength = np.abs(pull)
         buds = np.flatnonzero(strength > _DIRECTION_EPS)
         if buds.size > cfg.max_branching:
@@ -225,19 +219,25 @@ class Chamber:
             np.minimum.at(self._nearest, plants, np.abs(new - self.target))
         if self.target_mask is not None:
             self._rasterise(self._samples(self.pos[parents], new, 0.5 * self._pixel))
-        self._update_photons(self.pos[parents], new)
+        self._update_photons(self.pos[parents], new, start)
         self._outcome_cache = self._tips_cache = None
 
-    def _update_photons(self, a: np.ndarray, b: np.ndarray) -> None:
-        """Use up the photons at the new nodes b and raise the canopy over the segments a-b."""
-        near = self._x_range(b.real.min() - self._kill, b.real.max() + self._kill)
-        used = np.abs(self.photons[near, None] - b).min(axis=1) < self._kill
-        if used.any():
-            alive = np.ones(self.photons.size, bool)
-            alive[near] = ~used
+    def _update_photons(self, a: np.ndarray, b: np.ndarray, first: int) -> None:
+        """Re-point photons to the new nodes b (numbered from ``first``) where those are nearer,
+        use up the photons at them and raise the canopy over the segments a-b."""
+        distances = np.abs(self.photons[:, None] - b)
+        closest = distances.argmin(axis=1)  # ties go to the older node, as argmin over all does
+        distance = distances[np.arange(closest.size), closest]
+        nearer = distance < self._nearest_distance
+        self._nearest_node[nearer] = first + closest[nearer]
+        self._nearest_distance[nearer] = distance[nearer]
+        alive = distance >= self._kill
+        if not alive.all():
             self.photons = self.photons[alive]
             self._photon_x = self._photon_x[alive]
             self._photon_column = self._photon_column[alive]
+            self._nearest_node = self._nearest_node[alive]
+            self._nearest_distance = self._nearest_distance[alive]
         self._shade(a, b)
 
     def _shade(self, a: np.ndarray, b: np.ndarray) -> None:
