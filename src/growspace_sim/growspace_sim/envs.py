@@ -90,16 +90,7 @@ class GrowSpaceEnv(gym.Env):
         self.observation = observation
         self.render_mode = render_mode
         self.sim = Simulation(self.cfg, digit_source)
-        spot = self.cfg.uses_spotlight
-        if continuous:
-            size = 3 if spot else 2
-            self.action_space = gym.spaces.Box(-1.0, 1.0, (size,), np.float32)
-        else:
-            n_actions = len(lights.SPOT_ACTIONS if spot else lights.BEAM_ACTIONS)
-            self.action_space = gym.spaces.Discrete(n_actions)
-        side = self.cfg.resolution
-        high = 255 if observation == 'rgb' else 1
-        self.observation_space = gym.spaces.Box(0, high, (side, side, 3), np.uint8)
+        self.action_space, self.observation_space = spaces_for(self.cfg, continuous, observation)
 
     @property
     def chamber(self) -> Chamber:
@@ -120,7 +111,7 @@ class GrowSpaceEnv(gym.Env):
         if self.continuous:
             self.sim.apply_continuous(action)
         else:
-            self.sim.apply_discrete(_as_index(action))
+            self.sim.apply_discrete(as_action_index(action))
         outcome = self.sim.step()
         return self._observe(), outcome.reward, False, outcome.truncated, self._info(outcome)
 
@@ -148,8 +139,23 @@ class GrowSpaceEnv(gym.Env):
         return info
 
 
-def _as_index(action: Any) -> Any:
-    """Accept numpy scalars and 0-d arrays, as vector envs and SB3 pass them."""
+def spaces_for(cfg: SimConfig, continuous: bool,
+               observation: str = 'rgb') -> tuple[gym.spaces.Space, gym.spaces.Box]:
+    """The action and observation spaces of a chamber (shared with the ROS bridge)."""
+    spot = cfg.uses_spotlight
+    if continuous:
+        action_space: gym.spaces.Space = gym.spaces.Box(-1.0, 1.0, (3 if spot else 2,),
+                                                        np.float32)
+    else:
+        action_space = gym.spaces.Discrete(len(lights.SPOT_ACTIONS if spot
+                                               else lights.BEAM_ACTIONS))
+    side = cfg.resolution
+    high = 255 if observation == 'rgb' else 1
+    return action_space, gym.spaces.Box(0, high, (side, side, 3), np.uint8)
+
+
+def as_action_index(action: Any) -> Any:
+    """Accept numpy scalars and 0-d / 1-element arrays, as vector envs and SB3 pass them."""
     if isinstance(action, np.ndarray) and action.shape in ((), (1,)):
         return action.reshape(()).item()
     return action

@@ -1,0 +1,63 @@
+"""Shared pieces of the bridge tests: a loopback DDS domain and exact comparisons."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import random
+from typing import Any, Iterator
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / 'config' / 'cyclonedds.xml'
+KEYS = ('CYCLONEDDS_URI', 'ROS_DOMAIN_ID', 'GROWSPACE_TRANSPORT')
+
+
+def loopback_domain() -> Iterator[int]:
+    """Loopback-only Cyclone config and a random domain in 100-200, for us and our nodes."""
+    saved = {k: os.environ.get(k) for k in KEYS}
+    domain = random.SystemRandom().randint(100, 200)
+    os.environ['CYCLONEDDS_URI'] = CONFIG.as_uri()
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    os.environ['GROWSPACE_TRANSPORT'] = 'dds'
+    try:
+        yield domain
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def assert_identical(a: Any, b: Any, where: str = 'value') -> None:
+    """Exact equality of nested dicts, tuples and arrays (same dtype, shape and bytes)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and sorted(a) == sorted(b), f'{where}: {sorted(a)} vs {b}'
+        for key in a:
+            assert_identical(a[key], b[key], f'{where}[{key!r}]')
+    elif isinstance(a, (tuple, list)):
+        assert type(a) is type(b) and len(a) == len(b), f'{where}: {a!r} vs {b!r}'
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert_identical(x, y, f'{where}[{i}]')
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray), f'{where}: array vs {type(b)}'
+        assert a.dtype == b.dtype and a.shape == b.shape, \
+            f'{where}: {a.dtype}{a.shape} vs {b.dtype}{b.shape}'
+        if a.dtype == object:  # vector envs gather per-env tuples and dicts this way
+            for i, (x, y) in enumerate(zip(a.reshape(-1), b.reshape(-1))):
+                assert_identical(x, y, f'{where}[{i}]')
+        else:
+            assert a.tobytes() == b.tobytes(), f'{where}: values differ'
+    else:
+        assert a == b and np.asarray(a).dtype.kind == np.asarray(b).dtype.kind, \
+            f'{where}: {a!r} ({type(a).__name__}) vs {b!r} ({type(b).__name__})'
+
+
+def assert_same_transition(bridged: tuple, local: tuple, where: str) -> None:
+    """Two (obs, info) resets or (obs, reward, terminated, truncated, info) steps are identical."""
+    names = ('obs', 'info') if len(bridged) == 2 else ('obs', 'reward', 'terminated',
+                                                       'truncated', 'info')
+    for name, x, y in zip(names, bridged, local):
+        assert_identical(x, y, f'{where} {name}')
