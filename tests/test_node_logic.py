@@ -54,7 +54,8 @@ def test_startup_reset_publishes_step_zero_outputs() -> None:
     assert (result.step, result.step_id, result.reset_id, result.info) == (0, 0, 0, '')
     config = json.loads(transport.messages('chamber/config')[0].data)
     assert config['seed'] == SEED and config['version'] == growspace_sim.__version__
-    assert config['config']['challenge'] == 'control' and config['config']['mode'] == 'lockstep'
+    assert config['config']['challenge'] == 'control' and config['mode'] == 'lockstep'
+    assert SimConfig.from_dict(config['config']) == node.cfg
     # Namespaced, relative topics; /clock stays absolute.
     assert '/chamber1/step_result' in transport.published and '/clock' in transport.published
 
@@ -198,6 +199,23 @@ def test_reset_twice_then_step_and_seeded_reset_reproduces() -> None:
     assert len(transport.messages('chamber/config')) == 3
 
 
+def test_unseeded_reset_continues_the_stream_across_a_challenge_switch() -> None:
+    transport, node = make()
+    transport.inject('reset', reset(1, challenge='fairness'))
+    config = json.loads(transport.messages('chamber/config')[-1].data)
+    assert config['seed'] is None and config['reset_id'] == 1  # null: the stream continued
+    assert config['config']['challenge'] == 'fairness'
+    # The same stream in a plain Simulation: reset with the seed, then again unseeded.
+    from growspace_sim.simulation import Simulation
+
+    sim = Simulation(SimConfig())
+    sim.reset(seed=SEED)
+    switched = Simulation(SimConfig(challenge='fairness'))
+    switched.rng = sim.rng
+    switched.reset()
+    assert np.array_equal(image(transport.messages('camera/image_raw')[-1]), switched.observe())
+
+
 def test_challenge_switch_and_invalid_reset() -> None:
     transport, node = make()
     transport.inject('reset', reset(3, challenge='shape', setting='hard', has_seed=True, seed=1))
@@ -267,15 +285,18 @@ class FakeRecorder:
     def __init__(self) -> None:
         self.channels: list[tuple[str, str, object]] = []
         self.writes: list[tuple[int, bytes, int, int]] = []
+        self.calls = 0
         self.metadata: list[tuple[str, dict]] = []
         self.closed = 0
+        self.error: str | None = None
 
     def add_channel(self, topic: str, typename: str, qos: object) -> int:
         self.channels.append((topic, typename, qos))
         return len(self.channels) - 1
 
-    def write(self, channel: int, cdr: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        self.writes.append((channel, cdr, log_time_ns, publish_time_ns))
+    def write_many(self, messages: list[tuple[int, bytes, int, int]]) -> None:
+        self.calls += 1
+        self.writes += messages
 
     def add_metadata(self, name: str, data: dict) -> None:
         assert all(isinstance(v, str) for v in data.values())
@@ -300,10 +321,17 @@ def test_recorder_gets_every_message_exact_bytes() -> None:
         assert recorded[name] == [cdr for _, cdr in published], name
     assert recorded['/chamber1/light/command'] == sent[:2]
     assert recorded['/chamber1/reset'] == sent[2:]
-    assert [m[0] for m in recorder.metadata] == ['growspace', 'growspace']
+    # One recorder call per tick and per received message; time order is handling order.
+    assert recorder.calls == 4 + 3  # ticks: start, 2 steps, reset; 3 received
+    times = [log_ns for _, _, log_ns, _ in recorder.writes]
+    assert times == sorted(times) and times[0] == node.params.period_ns
+    assert [m[0] for m in recorder.metadata] == ['growspace']  # once, at start
     meta = recorder.metadata[0][1]
-    assert meta['seed'] == str(SEED) and json.loads(meta['config'])['seed'] == SEED
-    assert {'chamber_width_m', 'chamber_height_m', 'frame_conventions', 'version'} <= set(meta)
+    assert meta['seed'] == str(SEED) and SimConfig.from_dict(json.loads(meta['config'])) == \
+        SimConfig()
+    assert (meta['namespace'], meta['mode'], meta['frame_id']) == ('/chamber1', 'lockstep',
+                                                                   'chamber')
+    assert {'chamber_width_m', 'chamber_height_m', 'frame_convention', 'version'} <= set(meta)
     node.close()
     node.close()
     assert recorder.closed == 1
@@ -311,11 +339,32 @@ def test_recorder_gets_every_message_exact_bytes() -> None:
 
 def test_a_failing_recorder_does_not_stop_the_node() -> None:
     recorder = FakeRecorder()
-    recorder.write = lambda *a: (_ for _ in ()).throw(OSError('disk full'))
+    recorder.write_many = lambda *a: (_ for _ in ()).throw(OSError('disk full'))
     transport, node = make(recorder=recorder)
     transport.inject('light/command', command(1, action=1))
     assert last_result(transport).step == 1
     assert any('disk full' in w for w in transport.warnings)
+    assert node.recording_error is None  # a passing failure: the node keeps recording
+
+
+def test_a_stopped_recorder_is_reported_once_and_the_chamber_goes_on() -> None:
+    recorder = FakeRecorder()
+    transport, node = make(recorder=recorder)
+
+    def fail(messages: list) -> None:
+        recorder.calls += 1
+        recorder.error = 'Cannot write recording x.mcap: No space left on device'
+        raise RuntimeError(recorder.error)
+    recorder.write_many = fail
+    calls = recorder.calls
+    for step_id in range(1, 21):
+        transport.time_s += 10  # past any throttle: "once" is not the throttle
+        transport.inject('light/command', command(step_id, action=1))
+    assert last_result(transport).step == 20
+    assert recorder.calls == calls + 1  # no more writes after it stopped
+    stopped = [w for w in transport.warnings if 'No space left on device' in w]
+    assert len(stopped) == 1 and 'recording stopped' in stopped[0]
+    assert node.recording_error and 'No space' in node.recording_error
 
 
 def test_malformed_bytes_never_reach_the_node() -> None:

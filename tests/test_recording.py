@@ -1,12 +1,13 @@
 """The MCAP recorder: rosbag2 conventions, field-exact read-back, lossless lockstep, crash safety.
 
-Recordings come from ``EpisodeRunner``, which serialises exactly the messages ``sim_node``
-publishes; a spy subclass of the recorder keeps every (topic, bytes) it was given so the
-read-back can be compared with what was "published".
+Recordings come from ``EpisodeRunner``, a ``ChamberNode`` driven in process that records every
+message it handles; a spy subclass of the recorder keeps every (topic, bytes) it was given so
+the read-back can be compared with what was "published".
 """
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from pathlib import Path
@@ -16,16 +17,21 @@ import sys
 import textwrap
 import time
 
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
+from mcap.records import MessageIndex
+from mcap.stream_reader import breakup_chunk, StreamReader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+import zstandard
 
 from growspace_sim import recording
 from growspace_sim.agents import OracleAgent
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner, TOPICS
+from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.interface import TOPICS
 from growspace_sim.recording import McapRecorder, RecordingError
 from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
 from growspace_sim.ros import qos as ros_qos, types
@@ -47,9 +53,11 @@ class SpyRecorder(McapRecorder):
         self.topic_of[channel] = (topic, typename)
         return channel
 
-    def write(self, channel, cdr, log_time_ns, publish_time_ns):
-        super().write(channel, cdr, log_time_ns, publish_time_ns)
-        self.sent.append((*self.topic_of[channel], bytes(cdr), log_time_ns, publish_time_ns))
+    def write_many(self, messages):
+        messages = list(messages)
+        super().write_many(messages)
+        self.sent += [(*self.topic_of[channel], bytes(cdr), log_time_ns, publish_time_ns)
+                      for channel, cdr, log_time_ns, publish_time_ns in messages]
 
 
 def record(path: Path, challenge: str = 'control', episodes: int = 2, seed: int = 3,
@@ -60,7 +68,7 @@ def record(path: Path, challenge: str = 'control', episodes: int = 2, seed: int 
         runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
         agent = OracleAgent()
         for i in range(episodes):
-            ret, _ = runner.run_episode(agent.act, seed + i, request=i > 0)
+            ret, _ = runner.run_episode(agent.act, seed + i)
             returns.append(ret)
     return rec, returns
 
@@ -128,9 +136,9 @@ def test_file_follows_rosbag2_mcap_conventions(recorded):
             assert schema.encoding == 'ros2msg'
             assert schema.data.decode() == types.msgdef(schema.name)
             assert channel.metadata['topic_type_hash'] == types.type_hash(schema.name)
-            rel = next(r for r in TOPICS if channel.topic.endswith(r.lstrip('/')))
+            topic = next(t for t in TOPICS if channel.topic.endswith(t.name.lstrip('/')))
             assert channel.metadata['offered_qos_profiles'] == ros_qos.offered_qos_yaml(
-                TOPICS[rel][1])
+                topic.qos)
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     info = meta[recording.METADATA_NAME]
     assert info['seed'] == '3'
@@ -156,10 +164,11 @@ def test_lockstep_full_speed_exactly_one_result_per_step(tmp_path):
         commands = [m.decode() for m in bag.messages(['/growspace/light/command'])]
     keys = [(int(r.reset_id), int(r.step)) for r in results]
     assert len(keys) == len(set(keys)) == 4 * 51
-    for reset_id in range(1, 5):
+    for reset_id in range(4):  # 0: the node's first episode, at start
         assert sorted(s for r, s in keys if r == reset_id) == list(range(51))
     stepped = [int(r.step_id) for r in results if r.step > 0]
-    assert stepped == [int(c.step_id) for c in commands] == list(range(1, 201))
+    # Lockstep ids count from 1 again after every reset.
+    assert stepped == [int(c.step_id) for c in commands] == list(range(1, 51)) * 4
 
 
 def test_refuses_to_overwrite(tmp_path):
@@ -304,3 +313,35 @@ def test_stamps_and_sim_time(recorded):
     assert np.all(np.diff(times) == 100_000_000)  # one tick per step or reset at 10 Hz
     with Bag(path) as bag:
         assert bag.start_time < bag.end_time
+
+
+def _records(raw: bytes) -> list:
+    """The MCAP records of ``raw`` (no magic), chunks not opened."""
+    found = []
+    try:
+        for record in StreamReader(io.BytesIO(raw), skip_magic=True, emit_chunks=True,
+                                   validate_crcs=True).records:
+            found.append(record)
+    except EndOfFile:
+        pass
+    return found
+
+
+def test_hand_packed_chunk_and_index_records_are_mcaps_own(recorded):
+    # The writer packs Message, Chunk and MessageIndex records itself, for speed: they must be
+    # byte for byte what mcap's record classes write.
+    path, _, _ = recorded
+    data = path.read_bytes()
+    with open(path, 'rb') as stream:
+        chunk_indexes = make_reader(stream).get_summary().chunk_indexes
+    assert chunk_indexes
+    for ci in chunk_indexes:
+        start, end = ci.chunk_start_offset, ci.chunk_start_offset + ci.chunk_length
+        (chunk,) = _records(data[start:end])
+        assert recording._record_bytes(chunk) == data[start:end]
+        indexes = _records(data[end:end + ci.message_index_length])
+        assert {type(r) for r in indexes} == {MessageIndex}
+        assert recording._record_bytes(*indexes) == data[end:end + ci.message_index_length]
+        messages = breakup_chunk(chunk, validate_crc=True)
+        assert recording._record_bytes(*messages) == zstandard.ZstdDecompressor().decompress(
+            chunk.data, ci.uncompressed_size)

@@ -30,8 +30,8 @@ def record(path: Path, challenge: str = 'control', seeds=(5, 6)) -> list[float]:
     with McapRecorder(path) as rec:
         runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
         agent = OracleAgent()
-        for i, seed in enumerate(seeds):
-            returns.append(runner.run_episode(agent.act, seed, request=i > 0)[0])
+        for seed in seeds:
+            returns.append(runner.run_episode(agent.act, seed)[0])
     return returns
 
 
@@ -50,7 +50,7 @@ def test_resimulation_across_challenge_switch_and_unseeded_reset(tmp_path):
     agent = OracleAgent()
     with McapRecorder(path) as rec:
         runner = EpisodeRunner(SimConfig(), rec)
-        runner.run_episode(agent.act, 11, request=False)
+        runner.run_episode(agent.act, 11)
         runner.run_episode(agent.act, None)
         runner.run_episode(agent.act, None, challenge='shape')
         runner.run_episode(agent.act, 4, challenge='fairness', setting='hard')

@@ -74,7 +74,7 @@ def test_teleop_follows_step_ids_mode_and_light_kind() -> None:
     assert transport.published[transport.resolve('light/command')][-1][0].action == \
         SPOT_ACTIONS.index('up')
     teleop._on_config(types.new('std_msgs/msg/String', data=json.dumps(
-        {'config': {'mode': 'realtime', 'challenge': 'control'}})), b'')
+        {'mode': 'realtime', 'config': {'challenge': 'control'}})), b'')
     teleop.press(' ')
     last = transport.published[transport.resolve('light/command')][-1][0]
     assert last.step_id == 0 and last.mode == convert.MODE_DISCRETE

@@ -1,12 +1,12 @@
 """``growspace-record``: record agent episodes in-process, or a running chamber's topics.
 
 - ``growspace-record run OUT.mcap --challenge shape --episodes 3 --agent oracle --seed 7``
-  runs the chamber in-process (``episode_runner``) and records every message the node would
-  publish: lossless, deterministic, re-simulatable with ``growspace-replay check``.
+  runs the chamber node in process (``episode_runner``), which records every message it handles:
+  lossless, deterministic, re-simulatable with ``growspace-replay check``.
 - ``growspace-record subscribe OUT.mcap --namespace /growspace`` subscribes to a running
   chamber over Cyclone DDS (loopback unless CYCLONEDDS_URI is set) until Ctrl-C, SIGTERM or
   ``--duration``. A subscriber can miss messages the node published before it matched; the
-  node's own in-process recording (its output-path parameter) is the lossless one.
+  node's own recording (its ``record_path`` parameter) is the lossless one.
 
 SIGINT and SIGTERM finish the file (summary and indexes) before exiting.
 """
@@ -21,7 +21,9 @@ import time
 
 from growspace_sim import recording
 from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
-from growspace_sim.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner, NODE_NAME, TOPICS
+from growspace_sim.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
+from growspace_sim.node.interface import TOPICS
+from growspace_sim.node.params import DEFAULT_NODE_NAME
 from growspace_sim.ros import names, types
 
 
@@ -42,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
         period = 1.0 / args.rate_hz
         next_tick = time.monotonic()
         for episode in range(args.episodes):
-            # The first episode starts like the node (no request); later ones by ResetRequest.
-            runner.reset(args.seed + episode, request=episode > 0)
+            # The first episode is the node's start; later ones begin with a ResetRequest.
+            runner.reset(args.seed + episode)
             ret = 0.0
             while True:
                 if args.realtime:
@@ -67,15 +69,15 @@ def subscribe(args: argparse.Namespace) -> int:
 
     dds.ensure_loopback_config()
     namespace = names.normalize_namespace(args.namespace)
-    rank = {rel: i for i, rel in enumerate(TOPICS)}  # the node's per-step publishing order
+    rank = {topic.name: i for i, topic in enumerate(TOPICS)}  # the node's handling order
     deadline = None if args.duration is None else time.monotonic() + args.duration
     count = 0
     with recording.stop_on_signals(), \
             recording.McapRecorder(args.out, overwrite=args.overwrite) as recorder, \
             dds.DdsContext('growspace_recorder', '/', args.domain_id) as ctx:
         subs, channels = [], {}
-        for rel, (typename, qos) in TOPICS.items():
-            topic = names.resolve_topic(rel, NODE_NAME, namespace)
+        for _, rel, typename, qos in TOPICS:
+            topic = names.resolve_topic(rel, DEFAULT_NODE_NAME, namespace)
             # keep_all on the reader: a slow disk must not make DDS drop samples.
             reader_qos = ros_qos.QosProfile(history='keep_all', durability=qos.durability)
             subs.append((rel, ctx.create_subscription(typename, topic, reader_qos)))

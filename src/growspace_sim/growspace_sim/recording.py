@@ -13,6 +13,10 @@ and ``mcap_ros2`` read (design/ros2-interop.md section 3):
 - a metadata record ``growspace`` with the effective config, seed, software version and the
   chamber geometry (``growspace_metadata``).
 
+The chamber's side of the contract (topics, ``chamber/config`` payload, the ``growspace``
+metadata) lives in ``growspace_sim.node.interface``; the names below re-export it because they
+are part of the file format.
+
 Example:
     with McapRecorder('run.mcap') as rec:
         ch = rec.add_channel('/growspace/step_result', types.STEP_RESULT, qos.DEFAULT)
@@ -24,8 +28,6 @@ from __future__ import annotations
 import atexit
 import contextlib
 import dataclasses
-import hashlib
-import json
 import os
 from pathlib import Path
 import queue
@@ -33,7 +35,7 @@ import signal
 import struct
 import threading
 import time
-from typing import Any, BinaryIO, Callable, Iterator
+from typing import Any, BinaryIO, Callable, Iterable, Iterator
 import weakref
 import zlib
 
@@ -41,18 +43,16 @@ import mcap
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
-                          MessageIndex, Metadata, MetadataIndex, Schema, Statistics,
-                          SummaryOffset)
+                          Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
 from mcap.stream_reader import breakup_chunk, StreamReader
 import zstandard
 
 from growspace_sim import __version__
-from growspace_sim.core.config import SimConfig
+from growspace_sim.node.interface import (  # noqa: F401 - re-exported: part of the file format
+    FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 from growspace_sim.ros import qos as ros_qos, types
 
 PROFILE = 'ros2'
-METADATA_NAME = 'growspace'  # name of the metadata record with config, seed and geometry
-FORMAT = 'growspace-recording/1'  # bump when the topics or the metadata keys change meaning
 CHUNK_SIZE = 1024 * 1024  # B of uncompressed messages per chunk; what a hard kill can lose
 FLUSH_PERIOD_S = 1.0  # close the open chunk at least this often, so slow runs lose little too
 LIBRARY = f'growspace_sim {__version__}; mcap {mcap.__version__}'
@@ -61,9 +61,16 @@ _open_recorders: weakref.WeakSet[McapRecorder] = weakref.WeakSet()
 
 
 MAGIC = b'\x89MCAP0\r\n'
+# Record layouts of the MCAP spec, packed by hand on the hot path (mcap's RecordBuilder is a
+# Python call per field); test_recording checks the bytes against mcap's own writer.
 _MESSAGE_HEADER = struct.Struct('<BQHIQQ')  # opcode, record length, channel, sequence, times
 _MESSAGE_FIXED = 2 + 4 + 8 + 8  # bytes of a Message record before its data
+_MESSAGE_OP = int(Opcode.MESSAGE)  # an int: packing the IntEnum costs a conversion per message
+_CHUNK_HEADER = struct.Struct('<BQQQQII4sQ')  # ... crc, len('zstd'), 'zstd', compressed size
+_RECORD_HEADER = struct.Struct('<BQ')  # opcode, record length
+_INDEX_HEADER = struct.Struct('<HI')  # MessageIndex: channel, bytes of (time, offset) pairs
 _QUEUED_CHUNKS = 8  # chunks waiting for the disk at most; then write() waits (never drops)
+ZSTD_LEVEL = 1  # on chamber data as small as level 3 (within 1 %) and a third faster
 
 
 def _record_bytes(*records: Any) -> bytes:
@@ -77,30 +84,35 @@ class _ChunkedWriter:
     """An MCAP writer with a fast message path; compression and disk I/O on a worker thread.
 
     ``mcap.writer.Writer`` builds each message record from Python objects (about 35 us per
-    message), which alone made recording 60 % slower than the chamber itself. Here a message is
-    one ``struct.pack`` into the open chunk; full chunks go to a worker thread that compresses
-    them (zstd releases the GIL) and writes them, followed by their message indexes. Schemas,
-    channels and metadata are written outside chunks as they come, so a truncated file still
-    has them. The summary is laid out as ``mcap.writer.Writer`` lays it out. The methods mirror
-    ``mcap.writer.Writer`` and are called under the recorder's lock.
+    message), which alone made recording 60 % slower than the chamber itself. Here a batch of
+    messages (one per chamber tick) costs one call, and a message one ``struct.pack_into`` and
+    one copy into the open chunk's buffer. Buffers are reused: a fresh megabyte per chunk cost
+    more in page faults than compressing it. Full chunks go to a worker thread that compresses
+    them (zstd releases the GIL) and writes each with its message indexes in one write.
+    Schemas, channels and metadata are written outside chunks as they come, so a truncated file
+    still has them. The file is laid out as ``mcap.writer.Writer`` lays it out. The methods
+    mirror ``mcap.writer.Writer`` and are called under the recorder's lock.
     """
 
-    def __init__(self, stream: BinaryIO, chunk_size: int, level: int = 3) -> None:
+    def __init__(self, stream: BinaryIO, chunk_size: int, level: int = ZSTD_LEVEL) -> None:
         self._stream = stream
         self._chunk_size = chunk_size
         self._compressor = zstandard.ZstdCompressor(level=level)
         self._pos = 0
-        self._pieces: list[bytes] = []  # records of the open chunk, joined by the worker
-        self._chunk_len = 0  # bytes in _pieces
-        self._index: dict[int, list[tuple[int, int]]] = {}
+        # A message that starts below chunk_size fits, so small ones never grow a buffer.
+        self._buffer_size = chunk_size + 64 * 1024
+        self._free: list[bytearray] = []  # buffers the worker is done with
+        self._buffer = bytearray(self._buffer_size)  # the open chunk's records
+        self._chunk_len = 0  # bytes used in _buffer
+        self._index: dict[int, list[int]] = {}  # channel -> [log_time, offset, log_time, ...]
         self._chunk_start = self._chunk_end = 0
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
-        self._counts: dict[int, int] = {}
-        self._message_count = self._metadata_count = 0
-        self._start_time = self._end_time = 0
+        self._counts: dict[int, int] = {}  # messages per channel (= the last sequence number)
+        self._metadata_count = 0
+        self._start_time = self._end_time = -1  # over the chunks handed to the worker [ns]
         self.error: BaseException | None = None  # set by the worker; raised to the caller
         self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(_QUEUED_CHUNKS)
         self._worker: threading.Thread | None = None
@@ -139,43 +151,71 @@ class _ChunkedWriter:
             self._stream.flush()
         self._submit(job)
 
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
-                    sequence: int = 0) -> None:
-        offset = self._chunk_len
-        if not offset:
-            self._chunk_start = self._chunk_end = log_time
-        elif log_time < self._chunk_start:
-            self._chunk_start = log_time
-        elif log_time > self._chunk_end:
-            self._chunk_end = log_time
-        # One list extension (no copy of the data), then the index: a signal raising in
-        # between cannot leave half a record.
-        self._pieces += (_MESSAGE_HEADER.pack(Opcode.MESSAGE, _MESSAGE_FIXED + len(data),
-                                              channel_id, sequence, log_time, publish_time),
-                         data)
-        self._chunk_len = offset + 1 + 8 + _MESSAGE_FIXED + len(data)
-        index = self._index.get(channel_id)
-        if index is None:
-            index = self._index[channel_id] = []
-        index.append((log_time, offset))
-        if self._message_count == 0:
-            self._start_time = self._end_time = log_time
-        elif log_time < self._start_time:
-            self._start_time = log_time
-        elif log_time > self._end_time:
-            self._end_time = log_time
-        self._message_count += 1
-        self._counts[channel_id] += 1
-        if self._chunk_len >= self._chunk_size:
-            self.flush(wait=False)
+    def add_messages(self, messages: Iterable[tuple[int, bytes, int, int]]) -> None:
+        """Append ``(channel, data, log_time, publish_time)`` messages to the open chunk.
+
+        Each channel's messages get sequence numbers 1, 2, ...
+
+        Raises:
+            ValueError: A channel id is unknown or a time is outside [0, 2**64) ns; the
+                messages before it are kept.
+        """
+        counts, index, buffer = self._counts, self._index, self._buffer
+        pack_into = _MESSAGE_HEADER.pack_into
+        offset, start, end = self._chunk_len, self._chunk_start, self._chunk_end
+        try:
+            for channel, data, log_time, publish_time in messages:
+                sequence = counts[channel] + 1
+                size = len(data)
+                stop = offset + 9 + _MESSAGE_FIXED + size
+                if stop > len(buffer):
+                    buffer.extend(bytes(stop - len(buffer)))
+                pack_into(buffer, offset, _MESSAGE_OP, _MESSAGE_FIXED + size, channel,
+                          sequence, log_time, publish_time)
+                buffer[stop - size:stop] = data
+                # Only now is the record counted: an exception (or a signal) above leaves no
+                # half record in the chunk.
+                counts[channel] = sequence
+                if not offset:
+                    start = end = log_time
+                elif log_time < start:
+                    start = log_time
+                elif log_time > end:
+                    end = log_time
+                channel_index = index.get(channel)
+                if channel_index is None:
+                    channel_index = index[channel] = []
+                channel_index += (log_time, offset)
+                offset = stop
+                if offset >= self._chunk_size:
+                    self._chunk_len, self._chunk_start, self._chunk_end = offset, start, end
+                    self.flush(wait=False)
+                    buffer, index, offset = self._buffer, self._index, 0
+        except KeyError as e:
+            raise ValueError(f'Unknown channel id {e}; call add_channel first.') from None
+        except struct.error as e:
+            raise ValueError(f'Times must be ints in [0, 2**64) ns: {e}.') from None
+        finally:
+            self._chunk_len, self._chunk_start, self._chunk_end = offset, start, end
+
+    @property
+    def message_count(self) -> int:
+        return sum(self._counts.values())
 
     def flush(self, wait: bool = True) -> None:
         """Hand the open chunk to the worker; with ``wait``, until the OS has it."""
         if self._chunk_len:
-            pieces, index = self._pieces, self._index
+            buffer, size, index = self._buffer, self._chunk_len, self._index
             start, end = self._chunk_start, self._chunk_end
-            self._pieces, self._index, self._chunk_len = [], {}, 0
-            self._submit(lambda: self._write_chunk(b''.join(pieces), index, start, end))
+            # list.pop is atomic: the worker appends buffers it is done with concurrently.
+            self._buffer = self._free.pop() if self._free else bytearray(self._buffer_size)
+            self._index, self._chunk_len = {}, 0
+            if self._start_time < 0:
+                self._start_time, self._end_time = start, end
+            else:
+                self._start_time = min(self._start_time, start)
+                self._end_time = max(self._end_time, end)
+            self._submit(lambda: self._write_chunk(buffer, size, index, start, end))
         if wait:
             self._jobs.join()
             self._raise_worker_error()
@@ -224,29 +264,35 @@ class _ChunkedWriter:
         self._stream.write(data)
         self._pos += len(data)
 
-    def _write_chunk(self, chunk: bytes, index: dict[int, list[tuple[int, int]]],
+    def _write_chunk(self, buffer: bytearray, size: int, index: dict[int, list[int]],
                      start: int, end: int) -> None:
-        compressed = self._compressor.compress(chunk)
+        with memoryview(buffer) as view:
+            chunk = view[:size]
+            compressed = self._compressor.compress(chunk)
+            crc = zlib.crc32(chunk)
+            chunk.release()
+        self._free.append(buffer)
+        record_length = _CHUNK_HEADER.size - 9 + len(compressed)
+        parts = [_CHUNK_HEADER.pack(Opcode.CHUNK, record_length, start, end, size, crc, 4,
+                                    b'zstd', len(compressed)), compressed]
         chunk_start = self._pos
-        record = _record_bytes(Chunk(compression='zstd', data=compressed,
-                                     message_start_time=start, message_end_time=end,
-                                     uncompressed_crc=zlib.crc32(chunk),
-                                     uncompressed_size=len(chunk)))
-        self._write(record)
-        index_start = self._pos
-        builder = RecordBuilder()
         offsets = {}
-        for channel_id, records in index.items():
-            offsets[channel_id] = index_start + builder.count
-            MessageIndex(channel_id=channel_id, records=records).write(builder)
-        indexes = builder.end()
-        self._write(indexes)
+        index_start = position = chunk_start + 9 + record_length
+        for channel_id, pairs in index.items():
+            offsets[channel_id] = position
+            length = _INDEX_HEADER.size + 8 * len(pairs)
+            parts += (_RECORD_HEADER.pack(Opcode.MESSAGE_INDEX, length),
+                      _INDEX_HEADER.pack(channel_id, 8 * len(pairs)),
+                      struct.pack(f'<{len(pairs)}Q', *pairs))
+            position += _RECORD_HEADER.size + length
+        # One write (one GIL release) for the chunk and its indexes.
+        self._write(b''.join(parts))
         self._stream.flush()
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start, message_end_time=end, chunk_start_offset=chunk_start,
-            chunk_length=len(record), message_index_offsets=offsets,
-            message_index_length=len(indexes), compression='zstd',
-            compressed_size=len(compressed), uncompressed_size=len(chunk)))
+            chunk_length=9 + record_length, message_index_offsets=offsets,
+            message_index_length=position - index_start, compression='zstd',
+            compressed_size=len(compressed), uncompressed_size=size))
 
     def _write_summary(self) -> None:
         self._write(_record_bytes(DataEnd(data_section_crc=0)))
@@ -259,8 +305,9 @@ class _ChunkedWriter:
             (Opcode.STATISTICS, [Statistics(
                 attachment_count=0, channel_count=len(self._channels),
                 channel_message_counts=dict(self._counts),
-                chunk_count=len(self._chunk_indexes), message_count=self._message_count,
-                message_end_time=self._end_time, message_start_time=self._start_time,
+                chunk_count=len(self._chunk_indexes), message_count=self.message_count,
+                message_end_time=max(self._end_time, 0),
+                message_start_time=max(self._start_time, 0),
                 metadata_count=self._metadata_count, schema_count=len(self._schemas))]),
             (Opcode.CHUNK_INDEX, self._chunk_indexes),
             (Opcode.METADATA_INDEX, self._metadata_indexes),
@@ -317,10 +364,8 @@ class McapRecorder:
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str, str], int] = {}
-        self._sequence: dict[int, int] = {}
         self._error: str | None = None
         self._closed = False
-        self.message_count = 0
         if self.path.is_dir():
             raise RecordingError(f'{self.path} is a directory; give the path of a .mcap file.')
         try:
@@ -374,7 +419,6 @@ class McapRecorder:
                     {'offered_qos_profiles': qos_yaml,
                      'topic_type_hash': types.type_hash(typename)})
             self._channels[key] = channel
-            self._sequence[channel] = 0
             return channel
 
     def write(self, channel: int, cdr: bytes, log_time_ns: int, publish_time_ns: int) -> None:
@@ -390,23 +434,35 @@ class McapRecorder:
             RecordingError: The recorder is closed or failed, or writing failed now.
             ValueError: The channel id is unknown or a time is out of range.
         """
+        self.write_many(((channel, cdr, log_time_ns, publish_time_ns),))
+
+    def write_many(self, messages: Iterable[tuple[int, bytes, int, int]]) -> None:
+        """Append messages in order, e.g. everything a chamber tick published, in one call.
+
+        Args:
+            messages: ``(channel, cdr, log_time_ns, publish_time_ns)`` as for ``write``.
+
+        Raises:
+            RecordingError: The recorder is closed or failed, or writing failed now.
+            ValueError: A channel id is unknown or a time is out of range (the messages
+                before it are written).
+        """
         with self._lock:
             self._check_usable()
-            if channel not in self._sequence:
-                raise ValueError(f'Unknown channel id {channel}; call add_channel first.')
-            if not 0 <= log_time_ns < 2**64 or not 0 <= publish_time_ns < 2**64:
-                raise ValueError(f'Times must be in [0, 2**64) ns, got log_time '
-                                 f'{log_time_ns}, publish_time {publish_time_ns}.')
-            sequence = self._sequence[channel] = self._sequence[channel] + 1
             try:
-                self._writer.add_message(channel, log_time_ns, cdr, publish_time_ns, sequence)
-                self.message_count += 1
-                now = time.monotonic()
-                if self.flush_period_s and now - self._last_flush >= self.flush_period_s:
-                    self._writer.flush(wait=False)
-                    self._last_flush = now
+                self._writer.add_messages(messages)
+                if self.flush_period_s:
+                    now = time.monotonic()
+                    if now - self._last_flush >= self.flush_period_s:
+                        self._writer.flush(wait=False)
+                        self._last_flush = now
             except OSError as e:
                 self._fail(e)
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far."""
+        return self._writer.message_count
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write a metadata record now (it survives a later crash).
@@ -552,80 +608,6 @@ def stop_on_signals(signals: tuple[int, ...] = (signal.SIGTERM, signal.SIGINT)) 
             signal.signal(s, h)
 
 
-# ---------------------------------------------------------------------- metadata
-def config_dict(cfg: SimConfig) -> dict[str, Any]:
-    """JSON-ready fields of a config (``SimConfig.from_dict`` reads it back exactly)."""
-    values = dataclasses.asdict(cfg)
-    values['digits'] = list(cfg.digits)
-    return values
-
-
-def config_json(cfg: SimConfig, seed: int | None, **extra: Any) -> str:
-    """The ``chamber/config`` String payload: effective config, episode seed, version.
-
-    Args:
-        cfg: The effective configuration of the episode being started.
-        seed: The seed this reset used, or None when the random stream continued.
-        **extra: More JSON-ready keys (the node adds e.g. ``mode``, ``rate_hz``).
-
-    Returns:
-        Compact JSON with sorted keys (floats round-trip exactly).
-    """
-    payload = {'config': config_dict(cfg), 'seed': seed, 'version': __version__,
-               'format': FORMAT, **extra}
-    return json.dumps(payload, sort_keys=True, separators=(',', ':'))
-
-
-def growspace_metadata(cfg: SimConfig, seed: int | None, *, namespace: str, frame_id: str,
-                       rate_hz: float, lockstep: bool, digit_source: str = 'auto',
-                       digit_fingerprint: str = '') -> dict[str, str]:
-    """The ``growspace`` metadata record: what replay and a hardware driver need to know.
-
-    Args:
-        cfg: The configuration the chamber started with.
-        seed: Its first seed (None: unseeded, so the run cannot be re-simulated).
-        namespace: The chamber namespace, e.g. ``/growspace``.
-        frame_id: The chamber frame of every header, e.g. ``chamber``.
-        rate_hz: Simulation steps per second of simulated time.
-        lockstep: True if each LightCommand with a new step_id triggered exactly one step.
-        digit_source: Where shape targets come from (``digits.load_digits``).
-        digit_fingerprint: ``digit_fingerprint()`` of that set, for shape runs.
-
-    Returns:
-        String keys and values for ``McapRecorder.add_metadata(METADATA_NAME, ...)``.
-    """
-    return {
-        'format': FORMAT,
-        'version': __version__,
-        'config': json.dumps(config_dict(cfg), sort_keys=True, separators=(',', ':')),
-        'seed': '' if seed is None else str(seed),
-        'namespace': namespace,
-        'frame_id': frame_id,
-        'rate_hz': repr(float(rate_hz)),
-        'mode': 'lockstep' if lockstep else 'realtime',
-        'digit_source': digit_source,
-        'digit_fingerprint': digit_fingerprint,
-        # Geometry for a hardware driver: REP-103 units, chamber frame described in the docs.
-        'chamber_width_m': repr(cfg.chamber_width),
-        'chamber_height_m': repr(cfg.chamber_height),
-        'image_size_px': str(cfg.resolution),
-        'pixel_size_m': repr(cfg.chamber_width / cfg.resolution),
-        'light': 'spot' if cfg.uses_spotlight else 'beam',
-        'frame_convention': 'x right along the light rail from the left wall, z up from the '
-                            'floor, y = z cross x (into the image); image row 0 = chamber top',
-    }
-
-
-def digit_fingerprint(sim: Any) -> str:
-    """SHA-256 of a simulation's digit set (shape targets), or '' if it has none."""
-    digit_set = getattr(sim, 'digit_set', None)
-    if digit_set is None:
-        return ''
-    h = hashlib.sha256(digit_set.images.tobytes())
-    h.update(digit_set.labels.tobytes())
-    return h.hexdigest()
-
-
 # ---------------------------------------------------------------------- recovery
 @dataclasses.dataclass
 class RecoveryReport:
@@ -645,7 +627,8 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
 
     Reads the file front to back without its summary: schemas, channels, metadata and each chunk
     whose bytes are complete and whose CRC matches. Reading stops at the first truncated or
-    corrupt record; a hard kill loses only the chunk that was open.
+    corrupt record; a hard kill loses only the chunk that was open. Sequence numbers are
+    renumbered from 1 per channel, which keeps those of a file this recorder wrote.
 
     Args:
         src: The damaged recording.
@@ -689,8 +672,8 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, *,
                     sid = schema_map[schema.id]
                 mapping[msg.channel_id] = writer.register_channel(
                     channel.topic, channel.message_encoding, sid, dict(channel.metadata))
-            writer.add_message(mapping[msg.channel_id], msg.log_time, msg.data,
-                               msg.publish_time, msg.sequence)
+            writer.add_messages(((mapping[msg.channel_id], msg.data, msg.log_time,
+                                  msg.publish_time),))
             messages += 1
 
         def absorb(record: Any) -> None:

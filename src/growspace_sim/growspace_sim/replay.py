@@ -10,8 +10,8 @@
   CYCLONEDDS_URI says otherwise), with the recorded timing or as fast as possible;
 - ``recover BAG OUT``: copy the complete chunks of a file cut short by a crash.
 
-Messages are read in file order, which is the order the node wrote them in (the episode
-structure is described in ``episode_runner`` and ``docs/recording.md``).
+Messages are read in file order, which is the order the node handled them in (the topics and
+their order are ``node.interface``; the episode structure is in ``docs/recording.md``).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 
 from growspace_sim import convert, recording
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import TOPICS
+from growspace_sim.node.interface import TOPICS
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation
 
@@ -181,7 +181,8 @@ class Bag:
                               f'--namespace.')
         prefix = '' if namespace == '/' else namespace
         out = {}
-        for rel in TOPICS:
+        for topic in TOPICS:
+            rel = topic.name
             full = rel if rel.startswith('/') else f'{prefix}/{rel}'
             if full in self.topics:
                 out[rel] = full
@@ -234,7 +235,7 @@ class StepRecord:
     result: Any  # StepResult
     log_time: int
     outputs: dict[str, BagMessage]  # camera/image_raw, plant/state, light/state
-    commands: list[Any]  # LightCommands received since the previous step result
+    commands: list[Any]  # LightCommands received since the previous stepped result
 
 
 @dataclasses.dataclass
@@ -245,6 +246,8 @@ class Episode:
     seed: int | None  # None: the random stream continued from the previous episode
     seed_known: bool  # False: no record says which seed (a partial recording)
     steps: list[StepRecord]  # steps[0] is the reset
+    # StepResults answered without a step: rejected commands or resets, commands after the end
+    rejected: list[Any] = dataclasses.field(default_factory=list)
 
     @property
     def n_steps(self) -> int:
@@ -267,8 +270,10 @@ class Episode:
 def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
     """Group a chamber's messages into episodes (a StepResult with step 0 starts one).
 
-    Steps recorded before the first reset (a recorder that joined a running chamber) are
-    dropped: without their reset they cannot be re-simulated.
+    A StepResult that no observation preceded answered a request without a step (a rejected
+    command or reset, a command after the episode's end); it goes to ``Episode.rejected``. Steps
+    recorded before the first reset (a recorder that joined a running chamber) are dropped:
+    without their reset they cannot be re-simulated.
 
     Args:
         bag: The open recording.
@@ -304,6 +309,12 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
             outputs[rel] = msg
         elif rel == 'step_result':
             result = msg.decode()
+            if not outputs:
+                # Nothing changed; the commands so far still count (realtime: the latest one
+                # applies at the next tick).
+                if episodes:
+                    episodes[-1].rejected.append(result)
+                continue
             record = StepRecord(result, msg.log_time, outputs, commands)
             outputs, commands = {}, []
             if result.step == 0:
@@ -366,7 +377,8 @@ def summary(path: str | os.PathLike, namespace: str | None = None) -> dict[str, 
                 'index': e.index, 'reset_id': e.reset_id,
                 'challenge': e.config.challenge if e.config else '',
                 'setting': e.config.setting if e.config else '',
-                'seed': e.seed, 'steps': e.n_steps, 'return': e.episode_return,
+                'seed': e.seed, 'steps': e.n_steps, 'rejected': len(e.rejected),
+                'return': e.episode_return,
                 'success': bool(e.steps[-1].result.success), 'complete': e.done,
                 'duration_s': e.duration_ns / 1e9,
             } for e in episodes],
@@ -426,7 +438,7 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     Per episode: the recorded config and seed reset a ``Simulation`` (a config change builds a
     new one that keeps the random stream, as the node does); per step, the recorded light
     commands are applied through ``convert.apply_command`` (in lockstep only the one whose
-    step_id the result answers; real-time commands, step_id 0, all) and the chamber steps.
+    step_id the result answers; in realtime mode the latest one) and the chamber steps.
     Images (bytes), plant states (node arrays, tips, counts), applied lights and rewards must
     equal the recorded ones exactly. Stops at the first mismatch.
 
@@ -452,6 +464,7 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
                                        f'from this version\'s message definition.')
         meta = bag.metadata.get(recording.METADATA_NAME, {})
         source = digit_source or meta.get('digit_source') or 'auto'
+        lockstep = meta.get('mode') != 'realtime'
         episodes = read_episodes(bag, namespace)
         if not episodes:
             raise ReplayError(f'{bag.path} holds no episode start (StepResult with step 0).')
@@ -483,7 +496,7 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
             for record in episode.steps[1:]:
                 if mismatch is not None:
                     break
-                _apply_commands(sim, record)
+                _apply_command(sim, record, lockstep)
                 outcome = sim.step()
                 mismatch = _compare_step(sim, outcome, episode, record, report)
                 report.steps += 1
@@ -496,18 +509,20 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     return report
 
 
-def _apply_commands(sim: Simulation, record: StepRecord) -> None:
-    step_id = int(record.result.step_id)
-    applied = False
-    for command in record.commands:
-        cid = int(command.step_id)
-        if cid != 0 and (cid != step_id or applied):
-            continue  # a stale or repeated lockstep command: the node ignores it
-        applied = applied or cid != 0
-        try:
-            convert.apply_command(sim, command)
-        except ValueError:
-            pass  # the node rejected it too and kept the light
+def _apply_command(sim: Simulation, record: StepRecord, lockstep: bool) -> None:
+    """Apply the command the node applied before this step, as the node chose it."""
+    if lockstep:
+        # The first command with the step_id the result answers; others were late or repeated.
+        step_id = int(record.result.step_id)
+        chosen = next((c for c in record.commands if int(c.step_id) == step_id), None)
+    else:
+        chosen = record.commands[-1] if record.commands else None  # the latest one wins
+    if chosen is None:
+        return
+    try:
+        convert.apply_command(sim, chosen)
+    except ValueError:
+        pass  # the node rejected it too and kept the light
 
 
 def _compare_step(sim: Simulation, outcome: Any, episode: Episode, record: StepRecord,

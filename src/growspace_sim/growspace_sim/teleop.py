@@ -79,9 +79,9 @@ class Teleop:
 
     def _on_config(self, msg: Any, _: bytes) -> None:
         try:
-            config = json.loads(msg.data)['config']
-            self.mode = config['mode']
-            self.spot = config['challenge'] == 'shape'
+            payload = json.loads(msg.data)
+            self.mode = payload['mode']
+            self.spot = payload['config']['challenge'] == 'shape'
         except (ValueError, KeyError, TypeError):
             pass
 

@@ -1,64 +1,43 @@
 """The chamber node's logic, written once against ``transport.Transport``.
 
-Topics (relative, so a namespace or ``__ns`` remap puts several chambers side by side):
+Its topics, their QoS and publishing order are the table in ``node.interface``. Lockstep: every
+LightCommand whose step_id is above the last one processed since the latest reset is answered
+by exactly one StepResult with that step_id (after one step, or without a step when the command
+is invalid or the episode is over). Realtime: a timer steps at rate_hz with the latest command.
+Sim time advances 1/rate_hz per step and per reset in both modes.
 
-| topic | type | direction | QoS |
-|---|---|---|---|
-| ``light/command`` | growspace_msgs/LightCommand | in | reliable, keep_last 100 |
-| ``reset`` | growspace_msgs/ResetRequest | in | reliable, keep_last 100 |
-| ``camera/image_raw`` | sensor_msgs/Image (rgb8) | out | reliable, keep_last 10 |
-| ``plant/state`` | growspace_msgs/PlantState | out | reliable, keep_last 10 |
-| ``light/state`` | growspace_msgs/LightCommand (absolute, applied) | out | reliable, keep_last 10 |
-| ``step_result`` | growspace_msgs/StepResult (published last) | out | reliable, keep_last 10 |
-| ``/clock`` | rosgraph_msgs/Clock (sim time) | out | reliable, keep_last 1 |
-| ``chamber/config`` | std_msgs/String (JSON) | out | reliable, keep_last 1, latched |
-
-Lockstep: every LightCommand whose step_id is above the last one processed since the latest
-reset is answered by exactly one StepResult with that step_id (after one step, or without a
-step when the command is invalid or the episode is over). Realtime: a timer steps at rate_hz
-with the latest command. Sim time advances 1/rate_hz per step and per reset in both modes.
+Recording (the ``recorder`` hook, ``growspace_sim.recording.McapRecorder``): the node writes
+every message it receives and publishes, with the exact CDR bytes, stamped in sim time: the
+outputs of a step or reset at its tick, a received message half a period before the tick it
+causes (so time order is handling order). The ``growspace`` metadata record is written once, at
+start. A failing recorder never stops the chamber: the node reports it once and records no more.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import secrets
-from typing import Any, Protocol
+from typing import Any, Iterable, Protocol
 
 import numpy as np
 
-import growspace_sim
 from growspace_sim import convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
+from growspace_sim.node.interface import (
+    COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, STRING, config_json,
+    digit_fingerprint, growspace_metadata)
 from growspace_sim.node.params import NodeParams, ParamError, as_values, build
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation
 
-STRING = 'std_msgs/msg/String'
-RESET_SRV = 'growspace_msgs/srv/Reset'
-COMMAND_QOS = ros_qos.QosProfile(depth=100)  # deep enough that a lockstep client never loses one
-OBSERVATION_QOS = ros_qos.QosProfile(depth=10)
-EPISODE_OVER = 'episode over; send a reset'
-FRAMES = ('chamber frame: origin at the left end of the chamber floor, x along the light rail '
-          '[m], z up [m]; images rgb8, row 0 at the top of the chamber')
+__all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'OBSERVATION_QOS', 'OUTPUTS',
+           'Recorder']
 
-# (key, relative topic, type, QoS) of every output, in publishing order: step_result last.
-OUTPUTS = (
-    ('clock', '/clock', convert.CLOCK, ros_qos.CLOCK),
-    ('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),
-    ('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
-    ('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
-    ('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
-    ('config', 'chamber/config', STRING, ros_qos.LATCHED),
-)
-INPUTS = (
-    ('reset', 'reset', types.RESET_REQUEST, COMMAND_QOS),
-    ('command', 'light/command', types.LIGHT_COMMAND, COMMAND_QOS),
-)
+RESET_SRV = 'growspace_msgs/srv/Reset'
+EPISODE_OVER = 'episode over; send a reset'
 
 
 def _apply(sim: Simulation, msg: Any) -> None:
@@ -68,11 +47,16 @@ def _apply(sim: Simulation, msg: Any) -> None:
 
 
 class Recorder(Protocol):
-    """What the node needs from a recorder (``growspace_sim.recording.McapRecorder``)."""
+    """What the node needs from a recorder (``growspace_sim.recording.McapRecorder``).
+
+    A recorder that stopped for good (disk full, file gone) says why in ``error``.
+    """
+
+    error: str | None
 
     def add_channel(self, topic: str, typename: str, qos: ros_qos.QosProfile) -> int: ...
 
-    def write(self, channel: int, cdr: bytes, log_time_ns: int, publish_time_ns: int) -> None: ...
+    def write_many(self, messages: Iterable[tuple[int, bytes, int, int]]) -> None: ...
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None: ...
 
@@ -98,6 +82,7 @@ class ChamberNode:
         self.cfg = cfg
         self.digit_source = digit_source
         self.recorder = recorder
+        self.recording_error: str | None = None  # why the recorder stopped, once it did
         self.sim = Simulation(cfg, digit_source)
         self.sim_time_ns = 0
         self.last_step_id = 0
@@ -108,10 +93,11 @@ class ChamberNode:
         self.pending_cfg: SimConfig | None = None  # valid parameter changes, used at next reset
         self._latest: Any = None  # realtime: the command the next tick applies
         self._channels: dict[str, int] = {}
-        self._topics = {key: topic for key, topic, _, _ in OUTPUTS}
+        self._batch: list[tuple[int, bytes, int, int]] = []  # outputs of this tick, to record
+        self._log_ns = 0  # recording time of what the node handles now (sim time) [ns]
+        self._names = {key: transport.resolve(topic) for key, topic, _, _ in OUTPUTS}
         self._pubs = {key: transport.publisher(typename, topic, qos)
                       for key, topic, typename, qos in OUTPUTS}
-        self._register_channels()
         handlers = {'reset': self.on_reset, 'command': self.on_command}
         for key, topic, typename, qos in INPUTS:
             transport.subscribe(typename, topic, qos, handlers[key])
@@ -119,13 +105,14 @@ class ChamberNode:
         if self.params.mode == 'realtime':
             transport.create_timer(1.0 / self.params.rate_hz, self.tick)
         seed = self.params.seed if self.params.seed >= 0 else secrets.randbits(63)
+        self._start_recording(seed)
         self._reset(seed, cfg, reset_id=0)
 
     # --- inputs --------------------------------------------------------------------------
 
     def on_command(self, msg: Any, cdr: bytes) -> None:
         """A LightCommand arrived (transport callback)."""
-        self._record('command', cdr)
+        self._record_input('command', cdr)
         try:
             if self.params.mode == 'realtime':
                 self._latest = msg  # last wins, whatever its mode; validated at the tick
@@ -137,7 +124,7 @@ class ChamberNode:
 
     def on_reset(self, msg: Any, cdr: bytes) -> None:
         """A ResetRequest arrived (transport callback)."""
-        self._record('reset', cdr)
+        self._record_input('reset', cdr)
         reset_id = int(msg.reset_id)
         error = self.request_reset(msg, reset_id)
         if error:
@@ -239,14 +226,15 @@ class ChamberNode:
         self.outcome = self.sim.step()
         self.episode_over = self.outcome.truncated
         self.sim_time_ns += self.params.period_ns
+        self._log_ns = self.sim_time_ns
         self._publish_observation(step_id, info)
 
     def _reset(self, seed: int | None, cfg: SimConfig, reset_id: int) -> None:
         """Begin an episode; raises ValueError before changing anything if ``cfg`` is bad."""
         if cfg != self.cfg:
             sim = Simulation(cfg, self.digit_source)
-            sim.rng = self.sim.rng  # without a seed, continue the random stream
-            sim.seed = self.sim.seed
+            # Without a seed the random stream continues, so the episode stays reproducible.
+            sim.rng, sim.seed, sim.episode = self.sim.rng, self.sim.seed, self.sim.episode
             self.sim, self.cfg = sim, cfg
         self.pending_cfg = None
         self.outcome = self.sim.reset(seed=seed)
@@ -256,30 +244,26 @@ class ChamberNode:
         self.episode_over = False
         self._latest = None
         self.sim_time_ns += self.params.period_ns
-        self._publish_config()
+        self._log_ns = self.sim_time_ns
+        self._publish_config(seed)
         self._publish_observation(0, '')
 
     # --- outputs -------------------------------------------------------------------------
 
-    def config_dict(self) -> dict[str, Any]:
-        """The effective configuration, as published on ``chamber/config``."""
-        return {
-            'config': as_values(self.cfg, self.params), 'seed': self.seed,
-            'episode': self.sim.episode, 'reset_id': self.reset_id,
-            'version': growspace_sim.__version__, 'chamber_width_m': self.cfg.chamber_width,
-            'chamber_height_m': self.cfg.chamber_height, 'frames': FRAMES,
-        }
+    def config_payload(self, seed: int | None) -> str:
+        """The ``chamber/config`` payload of the current episode.
 
-    def _publish_config(self) -> None:
-        text = json.dumps(self.config_dict(), sort_keys=True)
-        self._publish('config', types.new(STRING, data=text))
-        if self.recorder is not None:
-            meta = {'config': text, 'seed': str(self.seed), 'version': growspace_sim.__version__,
-                    'chamber_width_m': repr(self.cfg.chamber_width),
-                    'chamber_height_m': repr(self.cfg.chamber_height),
-                    'frame_conventions': FRAMES, 'reset_id': str(self.reset_id),
-                    'episode': str(self.sim.episode)}
-            self._guard_recorder(lambda: self.recorder.add_metadata('growspace', meta))
+        Args:
+            seed: the seed of this reset; None when the random stream continued.
+        """
+        p = self.params
+        return config_json(self.cfg, seed, mode=p.mode, rate_hz=p.rate_hz,
+                           frame_id=p.frame_id, image_frame_id=p.image_frame_id,
+                           digit_source=self.digit_source, reset_id=self.reset_id,
+                           episode=self.sim.episode)
+
+    def _publish_config(self, seed: int | None) -> None:
+        self._publish('config', types.new(STRING, data=self.config_payload(seed)))
 
     def _publish_observation(self, step_id: int, info: str) -> None:
         stamp, p = self.sim_time_ns, self.params
@@ -298,11 +282,11 @@ class ChamberNode:
         self._publish_result(step_id, self.reset_id, info=info, outcome=self.outcome)
 
     def _wanted(self, key: str) -> bool:
-        return key in self._channels or self.transport.has_subscribers(self._topics[key])
+        return key in self._channels or self.transport.has_subscribers(self._names[key])
 
     def _publish_result(self, step_id: int, reset_id: int, info: str,
                         outcome: StepOutcome | None = None, truncated: bool = False) -> None:
-        """A StepResult; without ``outcome`` (nothing was stepped) the reward is 0."""
+        """A StepResult, the last message of a tick; without ``outcome`` the reward is 0."""
         if outcome is None:
             n = self.cfg.plant_count
             outcome = StepOutcome(0.0, np.zeros(n), False, truncated or self.episode_over, 0)
@@ -315,33 +299,65 @@ class ChamberNode:
         self._publish('result', convert.step_result_msg(
             outcome, step_id=step_id, reset_id=reset_id, step=self.sim.chamber.steps,
             stamp_ns=self.sim_time_ns, frame_id=self.params.frame_id, info=info))
+        if self._batch:
+            batch, self._batch = self._batch, []
+            self._write(batch)
 
     def _publish(self, key: str, msg: Any) -> None:
         cdr = self._pubs[key](msg)
-        self._record(key, cdr)
+        channel = self._channels.get(key)
+        if channel is not None:
+            # One recorder call per tick (in _publish_result): half the recording cost is the
+            # per-call locking and bookkeeping, not the bytes.
+            self._batch.append((channel, cdr, self._log_ns, self._log_ns))
 
     # --- recording -----------------------------------------------------------------------
 
-    def _register_channels(self) -> None:
-        if self.recorder is None:
+    def _start_recording(self, seed: int) -> None:
+        """Register every topic as a channel and write the metadata record (once)."""
+        recorder = self.recorder
+        if recorder is None:
             return
-        for key, topic, typename, qos in (*OUTPUTS, *INPUTS):
-            name = self.transport.resolve(topic)
-            self._guard_recorder(lambda: self._channels.__setitem__(
-                key, self.recorder.add_channel(name, typename, qos)))
+        namespace = self.transport.resolve('~').rsplit('/', 1)[0] or '/'
+        metadata = growspace_metadata(
+            self.cfg, seed, namespace=namespace, frame_id=self.params.frame_id,
+            rate_hz=self.params.rate_hz, lockstep=self.params.mode == 'lockstep',
+            digit_source=self.digit_source, digit_fingerprint=digit_fingerprint(self.sim))
+        try:
+            for key, topic, typename, qos in (*INPUTS, *OUTPUTS):
+                self._channels[key] = recorder.add_channel(self.transport.resolve(topic),
+                                                           typename, qos)
+            recorder.add_metadata(METADATA_NAME, metadata)
+        except Exception as e:  # noqa: BLE001 - a recorder must never stop the chamber
+            self._recording_failed(e)
 
-    def _record(self, key: str, cdr: bytes) -> None:
+    def _record_input(self, key: str, cdr: bytes) -> None:
         channel = self._channels.get(key)
         if channel is not None:
-            stamp = self.sim_time_ns
-            self._guard_recorder(lambda: self.recorder.write(channel, cdr, stamp, stamp))
+            # Half a period before the tick it causes; an answer without a step (a rejected
+            # command or reset) is recorded at the same time, right after it.
+            self._log_ns = self.sim_time_ns + self.params.period_ns // 2
+            self._write([(channel, cdr, self._log_ns, self._log_ns)])
 
-    def _guard_recorder(self, action: Any) -> None:
+    def _write(self, messages: list[tuple[int, bytes, int, int]]) -> None:
         try:
-            action()
+            self.recorder.write_many(messages)
         except Exception as e:  # noqa: BLE001 - a full disk must not stop the chamber
-            self.log.warn('recorder', f'recorder failed, message not recorded: '
-                          f'{type(e).__name__}: {e}')
+            self._recording_failed(e)
+
+    def _recording_failed(self, error: Exception) -> None:
+        reason = getattr(self.recorder, 'error', None)
+        if reason is None:
+            # A passing problem (this message only): say so, throttled, and go on recording.
+            self.log.warn('recorder', f'recorder: a message was not recorded: '
+                          f'{type(error).__name__}: {error}')
+            return
+        # The recorder stopped for good (disk full, file gone): say it once, stop recording
+        # and keep the chamber running; complete chunks stay recoverable.
+        self.recording_error = str(error)
+        self._channels.clear()
+        self._batch.clear()
+        self.log.warn('recorder:stopped', f'recording stopped, the chamber goes on: {error}')
 
     def close(self) -> None:
         """Finish the recording (if any). Idempotent."""

@@ -3,6 +3,12 @@
 GROWSPACE_TRANSPORT=dds|rclpy forces one. Exit codes: 0 after SIGINT/SIGTERM (the recording is
 finished first), 2 for an invalid parameter or argument (one line naming it, its value and
 what is allowed on stderr).
+
+SIGINT and SIGTERM only set a flag that the DDS spin loop checks every ``SPIN_S``; unlike
+``recording.stop_on_signals`` (which raises wherever the main thread is) this never cuts a
+lockstep step between its state change and its StepResult, or a DDS write. Either way the node
+is closed in ``finally``, which finishes the recording. rclpy mode gets the same from rclpy's own
+handler (ExternalShutdownException).
 """
 
 from __future__ import annotations
@@ -35,12 +41,12 @@ def make_recorder(path: str) -> Recorder | None:
     if not path:
         return None
     try:
-        from growspace_sim.recording import McapRecorder
+        from growspace_sim.recording import McapRecorder, RecordingError
     except ImportError as e:
         raise ParamError(f'record_path = {path!r} needs growspace_sim.recording: {e}') from None
     try:
         return McapRecorder(path)
-    except (OSError, ValueError) as e:
+    except RecordingError as e:  # exists already (never overwritten), no directory, no space
         raise ParamError(f'record_path = {path!r} cannot be written: {e}') from None
 
 
@@ -65,9 +71,14 @@ def run_dds(argv: Sequence[str]) -> int:
     try:
         ros_args = params.parse_ros_args(argv)
         cfg, node_params = params.build(ros_args.params)
-        recorder = make_recorder(node_params.record_path)
         transport = DdsTransport(ros_args.node_name, ros_args.namespace)
     except ValueError as e:  # ParamError, bad ROS_DOMAIN_ID, bad node name or namespace
+        print(f'sim_node: invalid parameter: {e}', file=sys.stderr)
+        return EXIT_BAD_PARAM
+    try:
+        recorder = make_recorder(node_params.record_path)
+    except ParamError as e:
+        transport.close()
         print(f'sim_node: invalid parameter: {e}', file=sys.stderr)
         return EXIT_BAD_PARAM
     stop = threading.Event()
@@ -76,8 +87,9 @@ def run_dds(argv: Sequence[str]) -> int:
     node = None
     try:
         node = ChamberNode(transport, cfg, node_params, recorder)
-        log.info('sim_node on Cyclone DDS: %s, %s mode, seed %s', transport.resolve('~'),
-                 node_params.mode, node.seed)
+        log.info('sim_node on Cyclone DDS: %s, %s mode, seed %s%s', transport.resolve('~'),
+                 node_params.mode, node.seed,
+                 f', recording to {node_params.record_path}' if recorder else '')
         while not stop.is_set():
             transport.spin_once(SPIN_S)
     finally:

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import yaml
 
-from growspace_sim.node.chamber_node import COMMAND_QOS
+from growspace_sim.node.interface import COMMAND_QOS
 from growspace_sim.ros import types
 
 

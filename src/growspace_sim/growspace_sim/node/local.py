@@ -1,0 +1,140 @@
+"""An in-process ``Transport``: the node without middleware, on a simulated clock.
+
+What crosses it is what crosses the real transports: messages serialised to their exact CDR
+bytes (which a recorder stores), malformed bytes dropped before the callback, callback
+exceptions caught. Publishing delivers to nobody (there is no one in process to deliver to);
+the transport keeps only the latest message of each topic, so an in-process run of any length
+holds no history. ``episode_runner`` drives a ``ChamberNode`` over it, and
+``node.fake.FakeTransport`` adds what tests inspect.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+import logging
+from typing import Any, Callable
+
+from growspace_sim.node.params import DEFAULT_NODE_NAME
+from growspace_sim.node.transport import (
+    MessageCallback, PublishFn, ServiceHandler, ThrottledLogger, guarded)
+from growspace_sim.ros import names, qos as ros_qos, types
+
+
+class LocalTransport:
+    """``Transport`` in process.
+
+    Args:
+        node_name: ROS node name, for name resolution.
+        namespace: ROS namespace.
+        services: whether ``serve`` succeeds (as rclpy) or declines (as DDS).
+        logger: where warnings go; by default Python logging, throttled in wall time.
+    """
+
+    def __init__(self, node_name: str = DEFAULT_NODE_NAME, namespace: str = '/', *,
+                 services: bool = True, logger: ThrottledLogger | None = None) -> None:
+        self.node_name = node_name
+        self.namespace = names.normalize_namespace(namespace)
+        if logger is None:
+            log = logging.getLogger(f'growspace_sim.{node_name}')
+            logger = ThrottledLogger(log.warning, log.info)
+        self.logger = logger
+        self.time_s = 0.0  # the simulated clock that timers run on [s]
+        self.latest: dict[str, Any] = {}  # fully qualified topic -> last message published
+        self.services: dict[str, ServiceHandler] = {}
+        self.closed = False
+        self._accept_services = services
+        self._types: dict[str, str] = {}
+        self._subs: dict[str, list[tuple[str, Callable[..., None]]]] = defaultdict(list)
+        self._timers: list[list[Any]] = []  # [period, due, callback]
+        self._resolved: dict[str, str] = {}
+
+    def resolve(self, topic: str) -> str:
+        name = self._resolved.get(topic)
+        if name is None:  # resolving costs ~15 us; a lockstep runner resolves every step
+            name = self._resolved[topic] = names.resolve_topic(topic, self.node_name,
+                                                               self.namespace)
+        return name
+
+    def publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> PublishFn:
+        name = self.resolve(topic)
+        self._types[name] = typename
+        serialize, published = types.serialize, self._published
+
+        def publish(msg: Any) -> bytes:
+            cdr = serialize(msg, typename)
+            published(name, msg, cdr)
+            return cdr
+        return publish
+
+    def _published(self, name: str, msg: Any, cdr: bytes) -> None:
+        self.latest[name] = msg
+
+    def subscribe(self, typename: str, topic: str, qos: ros_qos.QosProfile,
+                  callback: MessageCallback) -> None:
+        name = self.resolve(topic)
+        self._types[name] = typename
+        self._subs[name].append((typename, guarded(self.logger, name, callback)))
+
+    def has_subscribers(self, topic: str) -> bool:
+        return True  # in process, the caller reads every output
+
+    def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
+        if self._accept_services:
+            self.services[name] = handler
+        return self._accept_services
+
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> None:
+        self._timers.append([period_s, self.time_s + period_s,
+                             guarded(self.logger, 'timer', callback)])
+
+    def spin_once(self, timeout_s: float) -> None:
+        self.advance(timeout_s)
+
+    def advance(self, seconds: float) -> int:
+        """Move the clock forward, firing due timers in order; returns how many fired."""
+        end = self.time_s + seconds
+        fired = 0
+        while self._timers:
+            timer = min(self._timers, key=lambda t: t[1])
+            if timer[1] > end + 1e-12:
+                break
+            self.time_s = timer[1]
+            timer[1] += timer[0]
+            timer[2]()
+            fired += 1
+        self.time_s = end
+        return fired
+
+    def now_ns(self) -> int:
+        return int(self.time_s * 1e9)
+
+    def close(self) -> None:
+        self.closed = True
+
+    # --- the sending side ----------------------------------------------------------------
+
+    def inject(self, topic: str, msg: Any) -> bytes:
+        """Deliver a message built in process to the subscriptions of ``topic``.
+
+        It is serialised once (the subscriber records those bytes) and handed over as it is:
+        decoding bytes we just encoded would only cost time. ``FakeTransport`` decodes them.
+
+        Returns:
+            The CDR bytes delivered.
+        """
+        name = self.resolve(topic)
+        cdr = types.serialize(msg, self._types[name])
+        for _, callback in self._subs[name]:
+            callback(msg, cdr)
+        return cdr
+
+    def inject_raw(self, topic: str, cdr: bytes) -> None:
+        """Deliver raw bytes: malformed ones are dropped with a throttled warning."""
+        name = self.resolve(topic)
+        for typename, callback in self._subs[name]:
+            try:
+                msg = types.deserialize(cdr, typename)
+            except types.CdrError as e:
+                self.logger.warn(f'cdr:{name}', f'{name}: dropped a malformed message: {e}')
+                continue
+            callback(msg, cdr)
