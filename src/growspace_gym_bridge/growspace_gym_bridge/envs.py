@@ -146,6 +146,7 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
         self._reset_id = secrets.randbits(40) << 16  # unique per client; +1 per reset
         self._episode_reset_id: int | None = None
         self._step_id = 0
+        self._digit: int | None = None  # shape: the digit of this episode
         self._last_rgb: np.ndarray | None = None
         self._next_presence_check = 0.0
         start = namespace is None if start_node is None else start_node
@@ -267,6 +268,8 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
             raise CommandRejected(f'{self.link.transport.resolve("reset")}: reset_id '
                                   f'{self._reset_id} refused: {reply.result.info}')
         self._episode_reset_id = self._reset_id
+        if reply.config is not None:  # shape: the node says which digit it drew
+            self._digit = int(reply.config['digit'])
         return self._observe(reply), self._info(reply)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -344,9 +347,5 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
                              'radius': reply.light.radius}
         info['success'] = bool(result.success)
         if self.cfg.challenge == 'shape':
-            digit = (reply.config or {}).get('digit')
-            if digit is None and len(self.cfg.target_digits) == 1:
-                digit = self.cfg.target_digits[0]  # the node does not publish it (yet)
-            if digit is not None:
-                info['digit'] = int(digit)
+            info['digit'] = self._digit
         return info

@@ -25,9 +25,9 @@ RESULT, IMAGE, PLANT, LIGHT, CONFIG = 'step_result', 'camera/image_raw', 'plant/
 STATE_TOPICS = (PLANT, LIGHT)
 SPIN_S = 0.05  # longest blocking wait between two checks of the node's health [s]
 MAX_BUFFERED = 64  # outputs kept per topic while their StepResult is on its way
-# The node re-checks who reads an output at most every MATCH_CACHE_S: until then it may skip
+# The node re-checks an output nobody read every UNMATCHED_RECHECK_S: until then it may skip
 # outputs for a reader that matched after its last check (chamber_node._wanted).
-SETTLE_S = node_transport.MATCH_CACHE_S + 0.1
+SETTLE_S = node_transport.UNMATCHED_RECHECK_S + 0.05
 
 _NO_FLOATS = np.zeros(0, np.float32)
 Liveness = Callable[[Callable[[], str]], None]  # raises NodeDied naming what was awaited
@@ -250,10 +250,7 @@ def endpoint_matched(transport: Any, topic: str, writer: bool) -> bool:
     if hasattr(transport, 'ctx'):  # DdsTransport
         if writer:
             return transport.wait_for_subscribers(topic, 1, 0.0)
-        name = transport.resolve(topic)
-        # DdsTransport keeps its Subscriptions private; its DdsContext lists them.
-        return any(sub.topic == name and sub.matched_count() > 0
-                   for sub in transport.ctx._subscriptions)
+        return transport.publisher_count(topic) > 0
     if hasattr(transport, 'node'):  # RclpyTransport: count endpoints in the ROS graph
         name = transport.resolve(topic)
         count = transport.node.count_subscribers if writer else transport.node.count_publishers

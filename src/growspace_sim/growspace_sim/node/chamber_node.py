@@ -260,7 +260,7 @@ class ChamberNode:
         return config_json(self.cfg, seed, mode=p.mode, rate_hz=p.rate_hz,
                            frame_id=p.frame_id, image_frame_id=p.image_frame_id,
                            digit_source=self.digit_source, reset_id=self.reset_id,
-                           episode=self.sim.episode)
+                           episode=self.sim.episode, digit=self.sim.digit)
 
     def _publish_config(self, seed: int | None) -> None:
         self._publish('config', types.new(STRING, data=self.config_payload(seed)))

@@ -22,7 +22,11 @@ MessageCallback = Callable[[Any, bytes], None]  # (rosbags message, CDR bytes as
 ServiceHandler = Callable[[Any], Any]  # rosbags request -> rosbags response
 PublishFn = Callable[[Any], bytes]  # publishes a message, returns the CDR bytes written
 THROTTLE_S = 2.0  # one warning per key and period; a flood must not flood the log
-MATCH_CACHE_S = 0.5  # asking Cyclone for matched readers costs ~10 us; ask twice a second
+# Asking Cyclone for matched readers costs ~10 us, so the answer is cached: a reader found is
+# trusted for MATCH_CACHE_S, a topic without readers is asked again after UNMATCHED_RECHECK_S
+# so a new subscriber gets outputs almost at once.
+MATCH_CACHE_S = 0.5
+UNMATCHED_RECHECK_S = 0.05
 
 
 class ThrottledLogger:
@@ -172,11 +176,16 @@ class DdsTransport:
         name = self.resolve(topic)
         now = time.monotonic()
         checked, matched = self._matched.get(name, (-math.inf, True))
-        if now - checked > MATCH_CACHE_S:
+        if now - checked > (MATCH_CACHE_S if matched else UNMATCHED_RECHECK_S):
             pub = self._publishers.get(name)
             matched = pub is not None and pub.matched_count() > 0
             self._matched[name] = (now, matched)
         return matched
+
+    def publisher_count(self, topic: str) -> int:
+        """How many remote writers our subscription on ``topic`` is matched with (0 if none)."""
+        name = self.resolve(topic)
+        return sum(sub.matched_count() for sub, _ in self._subs if sub.topic == name)
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         # DDS services only interoperate with rmw_cyclonedds (design §1.8): topics instead.
