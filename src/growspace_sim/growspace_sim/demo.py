@@ -1,7 +1,12 @@
-"""The main job (``./run.sh demo``): a chamber run by an agent, recorded to ``bags/``.
+"""The main job (``./run.sh demo``): chambers run by agents, recorded to ``bags/``.
 
-Runs one episode per challenge with the oracle agent in-process and writes, per episode, an
-animated GIF of the observations to ``bags/``.
+1. The oracle plays one episode of each challenge on the chamber node, in process; the node
+   records every message to ``bags/demo-<time>/oracle.mcap``.
+2. A ``sim_node`` process on Cyclone DDS (loopback only) records itself to
+   ``bags/demo-<time>/bridge.mcap`` while a random agent plays one control episode through the
+   Gymnasium bridge, over ROS 2 topics.
+3. Both recordings are re-simulated from their seeds and commands and must match bit for bit;
+   every episode is exported as a GIF next to them.
 """
 
 from __future__ import annotations
@@ -11,55 +16,80 @@ import sys
 import time
 from pathlib import Path
 
-import cv2
-import gymnasium as gym
-import imageio.v2 as imageio
 import numpy as np
 
-import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents import OracleAgent
-from growspace_sim.core.config import CHALLENGES, SETTINGS
-from growspace_sim.registration import env_id
-
-GIF_SIDE = 252  # px; observations are scaled up with nearest-neighbour so pixels stay crisp
-
-
-def record_gif(challenge: str, setting: str, seed: int, out_dir: Path) -> tuple[Path, float]:
-    """Play one oracle episode and save it as a GIF; returns the path and the return."""
-    env = gym.make(env_id(challenge, setting))
-    agent = OracleAgent()
-    obs, _ = env.reset(seed=seed)
-    frames, total, done = [obs], 0.0, False
-    while not done:
-        obs, reward, terminated, truncated, _ = env.step(agent.act(obs, env))
-        frames.append(obs)
-        total += float(reward)
-        done = terminated or truncated
-    path = _unique(out_dir / f'{challenge}-{setting}-seed{seed}.gif')
-    big = [cv2.resize(f, (GIF_SIDE, GIF_SIDE), interpolation=cv2.INTER_NEAREST) for f in frames]
-    imageio.mimsave(path, big, duration=0.1, loop=0)
-    return path, total
+from growspace_sim import replay
+from growspace_sim.agents import OracleAgent, RandomAgent
+from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.recording import McapRecorder
 
 
-def _unique(path: Path) -> Path:
-    """Never overwrite: add a time stamp when the name is taken."""
-    if not path.exists():
-        return path
-    return path.with_name(f'{path.stem}-{time.strftime("%Y%m%d-%H%M%S")}{path.suffix}')
+def record_oracle(path: Path, setting: str, seed: int) -> None:
+    """One oracle episode per challenge on an in-process chamber node, recorded to ``path``."""
+    with McapRecorder(path) as recorder:
+        runner = EpisodeRunner(SimConfig(challenge=CHALLENGES[0], setting=setting), recorder)
+        oracle = OracleAgent()
+        for challenge in CHALLENGES:
+            total, steps = runner.run_episode(oracle.act, seed, challenge=challenge)
+            print(f'  oracle  {challenge:10s} {setting}: return {total:6.2f} over {steps} steps')
+        runner.close()
+
+
+def record_bridged(path: Path, setting: str, seed: int) -> None:
+    """A random agent plays control through the ROS bridge; the node records to ``path``."""
+    from growspace_gym_bridge.envs import GrowSpaceBridgeEnv  # DDS only for this part
+
+    env = GrowSpaceBridgeEnv('control', setting, node_params={'record_path': str(path)})
+    try:
+        agent = RandomAgent(env.action_space, seed)
+        observation, _ = env.reset(seed=seed)
+        total, done = 0.0, False
+        while not done:
+            observation, reward, terminated, truncated, _ = env.step(
+                agent.act(observation, env))
+            total += reward
+            done = terminated or truncated
+        print(f'  random  control    {setting}: return {total:6.2f} through sim_node '
+              f'({env.namespace})')
+    finally:
+        env.close()  # stops the node, which finishes its recording
+
+
+def check_and_export(path: Path) -> bool:
+    """Re-simulate a recording and export each of its episodes as a GIF; True if it matched."""
+    report = replay.resimulate(path)
+    verdict = 'reproduced bit for bit' if report.ok else f'MISMATCH: {report.mismatch}'
+    print(f'  {path}: {report.episodes} episodes, {report.steps} steps, {verdict}')
+    with replay.Bag(path) as bag:
+        episodes = replay.read_episodes(bag)
+    for index, episode in enumerate(episodes):
+        if episode.n_steps:  # the node's start-up episode before a client's reset has none
+            gif = path.with_name(f'{path.stem}-episode{index}.gif')
+            replay.export_episode(path, gif, episode=index, progress=False)
+    return report.ok
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--out', default='bags', help='output directory (default: bags/)')
+    parser.add_argument('--out', default='bags', help='parent directory (default: bags/)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--setting', default='hard', choices=SETTINGS)
+    parser.add_argument('--no-ros', action='store_true',
+                        help='skip the sim_node + bridge part (no DDS)')
     args = parser.parse_args(argv)
-    out_dir = Path(args.out)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for challenge in CHALLENGES:
-        path, total = record_gif(challenge, args.setting, args.seed, out_dir)
-        print(f'{challenge:10s} {args.setting}: oracle return {total:6.2f} -> {path}')
-    return 0
+    out = Path(args.out) / f'demo-{time.strftime("%Y%m%d-%H%M%S")}'
+    out.mkdir(parents=True, exist_ok=False)  # a new directory: nothing is ever overwritten
+    print(f'Recording to {out}/')
+    record_oracle(out / 'oracle.mcap', args.setting, args.seed)
+    recordings = [out / 'oracle.mcap']
+    if not args.no_ros:
+        record_bridged(out / 'bridge.mcap', args.setting, args.seed)
+        recordings.append(out / 'bridge.mcap')
+    print('Re-simulating and exporting GIFs:')
+    ok = all([check_and_export(path) for path in recordings])
+    print(f'Done: {out}/ (open the .mcap files in Foxglove, or: growspace-replay info FILE)')
+    return 0 if ok else 1
 
 
 if __name__ == '__main__':
