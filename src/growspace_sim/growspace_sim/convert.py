@@ -7,6 +7,7 @@ reads them here, so the topics carry the same bytes whichever way they were prod
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -23,14 +24,20 @@ MODE_BEAM, MODE_SPOT, MODE_DISCRETE, MODE_CONTINUOUS = 0, 1, 2, 3
 MAX_SEED = 2**63 - 1  # seeds travel as uint64; numpy takes any non-negative int
 
 
+@functools.lru_cache(maxsize=None)
+def _cls(typename: str) -> type:
+    """The message class of a type (cached: messages are built on every step)."""
+    return types.msg_class(typename)
+
+
 def stamp(ns: int) -> Any:
     """``builtin_interfaces/Time`` for a time in nanoseconds."""
-    return types.msg_class('builtin_interfaces/msg/Time')(sec=ns // 1_000_000_000,
-                                                          nanosec=ns % 1_000_000_000)
+    return _cls('builtin_interfaces/msg/Time')(sec=ns // 1_000_000_000,
+                                               nanosec=ns % 1_000_000_000)
 
 
 def header(ns: int, frame_id: str) -> Any:
-    return types.msg_class('std_msgs/msg/Header')(stamp=stamp(ns), frame_id=frame_id)
+    return _cls('std_msgs/msg/Header')(stamp=stamp(ns), frame_id=frame_id)
 
 
 def to_ns(time: Any) -> int:
@@ -41,7 +48,7 @@ def to_ns(time: Any) -> int:
 def image_msg(image: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
     """``sensor_msgs/Image`` rgb8 of an (H, W, 3) uint8 observation."""
     height, width = image.shape[:2]
-    return types.msg_class(IMAGE)(
+    return _cls(IMAGE)(
         header=header(stamp_ns, frame_id), height=height, width=width, encoding='rgb8',
         is_bigendian=0, step=width * 3, data=np.ascontiguousarray(image).reshape(-1))
 
@@ -64,7 +71,7 @@ def plant_state_msg(chamber: Chamber, step_id: int, stamp_ns: int, frame_id: str
     """``growspace_msgs/PlantState`` of every plant in the chamber."""
     n = chamber.n_nodes
     pos = chamber.pos[:n]
-    return types.msg_class(types.PLANT_STATE)(
+    return _cls(types.PLANT_STATE)(
         header=header(stamp_ns, frame_id), step_id=step_id, step=chamber.steps,
         node_x=pos.real.copy(), node_z=pos.imag.copy(),
         parent=chamber.parent[:n].astype(np.int32), plant=chamber.plant[:n].astype(np.uint8),
@@ -75,7 +82,7 @@ def plant_state_msg(chamber: Chamber, step_id: int, stamp_ns: int, frame_id: str
 def step_result_msg(outcome: StepOutcome, *, step_id: int, reset_id: int, step: int,
                     stamp_ns: int, frame_id: str, info: str = '') -> Any:
     """``growspace_msgs/StepResult`` of a step (or of a reset, with step 0)."""
-    return types.msg_class(types.STEP_RESULT)(
+    return _cls(types.STEP_RESULT)(
         header=header(stamp_ns, frame_id), step_id=step_id, reset_id=reset_id, step=step,
         reward=outcome.reward, plant_rewards=np.asarray(outcome.plant_rewards, np.float64),
         terminated=False, truncated=outcome.truncated, success=outcome.success, info=info)
@@ -83,14 +90,14 @@ def step_result_msg(outcome: StepOutcome, *, step_id: int, reset_id: int, step: 
 
 def light_msg(light: Light, step_id: int, stamp_ns: int, frame_id: str) -> Any:
     """The applied light as an absolute ``growspace_msgs/LightCommand`` (beam or spot mode)."""
-    return types.msg_class(types.LIGHT_COMMAND)(
+    return _cls(types.LIGHT_COMMAND)(
         header=header(stamp_ns, frame_id), step_id=step_id,
         mode=MODE_SPOT if light.spot else MODE_BEAM, x=light.x, z=light.z, width=light.width,
         radius=light.radius, action=0, continuous=np.zeros(0, np.float32))
 
 
 def clock_msg(stamp_ns: int) -> Any:
-    return types.msg_class(CLOCK)(clock=stamp(stamp_ns))
+    return _cls(CLOCK)(clock=stamp(stamp_ns))
 
 
 def apply_command(sim: Any, msg: Any) -> None:

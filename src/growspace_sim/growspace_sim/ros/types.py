@@ -273,7 +273,23 @@ def serialize(msg: Any, typename: str) -> bytes:
     Returns:
         The serialised bytes, not padded.
     """
-    return bytes(typestore().serialize_cdr(msg, typename, little_endian=True))
+    store = typestore()
+    getsize, write = _cdr_functions(typename)
+    data = bytearray(4 + getsize(0, msg, store))
+    data[1] = 1  # encapsulation header 00 01 00 00: CDR, little endian
+    write(memoryview(data)[4:], 0, msg, store)
+    return bytes(data)
+
+
+@functools.lru_cache(maxsize=None)
+def _cdr_functions(typename: str) -> tuple[Any, Any]:
+    """rosbags' generated size and little-endian writer of a type, looked up once.
+
+    ``Typestore.serialize_cdr`` does exactly this per call; keeping the two functions saves
+    the lookup on the node's hot path (the bytes are the same, tests/test_msgs_wire.py).
+    """
+    msgdef = typestore().get_msgdef(typename)
+    return msgdef.getsize_cdr, msgdef.serialize_cdr_le
 
 
 def deserialize(data: bytes | memoryview, typename: str) -> Any:
