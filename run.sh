@@ -24,7 +24,7 @@ setup() {
   local pip=("$venv/bin/python" -m pip install -q --disable-pip-version-check)
   "${pip[@]}" -r "$requirements"
   "${pip[@]}" --no-deps -r requirements-nodeps.txt
-  "${pip[@]}" --no-deps --no-build-isolation -e src/growspace_sim -e src/growspace_gym_bridge
+  "${pip[@]}" --no-deps -e src/growspace_sim -e src/growspace_gym_bridge
   touch "$stamp"
 }
 
