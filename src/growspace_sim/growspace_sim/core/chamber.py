@@ -227,7 +227,7 @@ class Chamber:
         use up the photons at them and raise the canopy over the segments a-b."""
         distances = np.abs(self.photons[:, None] - b)
         closest = distances.argmin(axis=1)  # ties go to the older node, as argmin over all does
-        distance = distances[np.arange(closest.size), closest]
+        distance = distances.min(axis=1)
         nearer = distance < self._nearest_distance
         self._nearest_node[nearer] = first + closest[nearer]
         self._nearest_distance[nearer] = distance[nearer]
@@ -322,7 +322,7 @@ class Chamber:
 
     def _tip_positions(self) -> tuple[np.ndarray, ...]:
         tips = self.tips()
-        xz = np.column_stack((self.pos[tips].real, self.pos[tips].imag))
+        xz = self.pos[tips].view(np.float64).reshape(-1, 2)  # complex = (x, z) pairs in memory
         xz.flags.writeable = False
         if self.cfg.plant_count == 1:
             return (xz,)
