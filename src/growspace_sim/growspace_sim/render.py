@@ -34,8 +34,8 @@ class Renderer:
         # col = x * px_per_m - 0.5 and row = (height - z) * rows_per_m - 0.5, in 1/16 px:
         # pixel i covers [i, i + 1) and OpenCV addresses its centre i, hence the half pixel.
         one = 1 << _SHIFT
-        self._fixed_scale = np.array([self._px_per_m, -self._rows_per_m]) * one
-        self._fixed_offset = np.array([-0.5, cfg.chamber_height * self._rows_per_m - 0.5]) * one
+        self._fixed_scale = (self._px_per_m * one, -self._rows_per_m * one)
+        self._fixed_offset = (-0.5 * one, (cfg.chamber_height * self._rows_per_m - 0.5) * one)
         self._drawn_nodes = -1
         self._drawn_light: tuple[float, ...] | None = None
         self._drawn_px = np.zeros(0, np.int32)
@@ -49,7 +49,7 @@ class Renderer:
             self._target[chamber.target_mask] = INTENSITY[TARGET]
         else:
             radius = chamber.cfg.width_m(chamber.cfg.target_radius)
-            cv2.circle(self._target, self._point(chamber.target), self._fixed(radius),
+            cv2.circle(self._target, self._fixed_point(chamber.target), self._fixed(radius),
                        INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)
         self._drawn_nodes = -1  # force a full plant and light draw
         self._drawn_light = None
@@ -79,37 +79,36 @@ class Renderer:
             self._plant[chamber.occupancy] = INTENSITY[PLANT]
             return
         roots, n = chamber.cfg.plant_count, chamber.n_nodes  # roots come first, with no segment
-        px = self._px_for_descendants[chamber.descendants[roots:]]
+        px = self._px_for_descendants.take(chamber.descendants[roots:])
         todo = np.flatnonzero(px > self._drawn_px[roots:n])  # new segments and thickened ones
         self._drawn_px[roots:n] = px
         if todo.size == 0:
             return
-        thickness = px[todo].tolist()
+        # A step draws a handful of segments: plain Python beats numpy calls on such sizes.
+        thickness = px.take(todo).tolist()
         todo += roots
-        ends = self._fixed_points(np.concatenate((chamber.pos[todo],
-                                                  chamber.pos[chamber.parent[todo]])))
-        ends = ends.reshape(2, todo.size, 2).tolist()
-        for end, start, width in zip(ends[0], ends[1], thickness):
-            cv2.line(self._plant, start, end, INTENSITY[PLANT], width, cv2.LINE_8, _SHIFT)
+        ends = chamber.pos.take(todo).tolist()
+        starts = chamber.pos.take(chamber.parent.take(todo)).tolist()
+        point = self._fixed_point
+        for start, end, width in zip(starts, ends, thickness):
+            cv2.line(self._plant, point(start), point(end), INTENSITY[PLANT], width, cv2.LINE_8,
+                     _SHIFT)
 
     def _draw_light(self, chamber: Chamber) -> None:
         light = chamber.light
         self._light.fill(0)  # 7 kB: cheaper than working out what changed
         if light.spot:
-            cv2.circle(self._light, self._point(complex(light.x, light.z)),
+            cv2.circle(self._light, self._fixed_point(complex(light.x, light.z)),
                        self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
         else:
             left = int(round((light.x - 0.5 * light.width) * self._px_per_m))
             right = int(round((light.x + 0.5 * light.width) * self._px_per_m))
             self._light[:, max(left, 0):right] = INTENSITY[LIGHT]
 
-    def _point(self, p: complex) -> tuple[int, int]:
-        return tuple(self._fixed_points(np.array([p]))[0].tolist())
-
-    def _fixed_points(self, points: np.ndarray) -> np.ndarray:
-        """(K, 2) int32 OpenCV fixed-point (col, row) of chamber points (complex, m)."""
-        xz = points.view(np.float64).reshape(-1, 2)  # a complex array is (x, z) pairs in memory
-        return np.rint(xz * self._fixed_scale + self._fixed_offset).astype(np.int32)
+    def _fixed_point(self, p: complex) -> tuple[int, int]:
+        """OpenCV fixed-point (col, row) of a chamber point (complex, m)."""
+        scale, offset = self._fixed_scale, self._fixed_offset
+        return (round(p.real * scale[0] + offset[0]), round(p.imag * scale[1] + offset[1]))
 
     def _fixed(self, metres: float) -> int:
         return int(round(metres * self._px_per_m * (1 << _SHIFT)))

@@ -187,12 +187,9 @@ class Chamber:
         if buds.size > cfg.max_branching:
             buds = np.sort(self._rng.choice(buds, cfg.max_branching, replace=False))
         new = self.pos[buds] + self._branch_length * pull[buds] / strength[buds]
-        x, z = new.real, new.imag
-        if x.min() < 0.0 or x.max() > cfg.chamber_width or z.min() < 0.0 \
-                or z.max() > cfg.chamber_height:
-            # A segment that would pierce a wall, the floor or the ceiling is not grown.
-            inside = (x >= 0.0) & (x <= cfg.chamber_width) & (z >= 0.0) \
-                & (z <= cfg.chamber_height)
+        w, h = cfg.chamber_width, cfg.chamber_height
+        inside = [0.0 <= p.real <= w and 0.0 <= p.imag <= h for p in new.tolist()]
+        if not all(inside):  # a segment that would pierce a wall, floor or ceiling: not grown
             buds, new = buds[inside], new[inside]
             if buds.size == 0:
                 return 0
