@@ -17,3 +17,20 @@ def child_env() -> dict:
         [os.path.join(ROOT, 'src', p) for p in ('growspace_sim', 'growspace_gym_bridge')]
         + [os.path.join(ROOT, 'tests')] + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
     return env
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        'markers', 'slow: long runs (minutes, e.g. learning checks); skipped unless '
+                   'GROWSPACE_RUN_SLOW=1 or selected with -m slow')
+
+
+def pytest_collection_modifyitems(config, items):
+    import pytest  # noqa: PLC0415
+
+    if os.environ.get('GROWSPACE_RUN_SLOW') == '1' or 'slow' in (config.getoption('-m') or ''):
+        return
+    skip = pytest.mark.skip(reason='slow: set GROWSPACE_RUN_SLOW=1 or use -m slow')
+    for item in items:
+        if 'slow' in item.keywords:
+            item.add_marker(skip)

@@ -70,7 +70,7 @@ def assert_steps_like_the_env(transport: FakeTransport) -> None:
 def test_ten_thousand_random_and_malformed_commands_in_process() -> None:
     rng = random.Random(20240601)
     transport = FakeTransport()
-    node = ChamberNode(transport, SimConfig(), NodeParams(seed=1))
+    ChamberNode(transport, SimConfig(), NodeParams(seed=1))  # subscribes to the transport
     for i in range(10_000):
         roll = rng.random()
         if roll < 0.6:

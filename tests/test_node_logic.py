@@ -144,8 +144,8 @@ def test_command_after_the_episode_is_answered_without_a_step() -> None:
     images = len(transport.messages('camera/image_raw'))
     transport.inject('light/command', command(4, action=2))
     result = last_result(transport)
-    assert (result.step_id, result.step, result.truncated, result.info) == (4, 3, True,
-                                                                           EPISODE_OVER)
+    expected = (4, 3, True, EPISODE_OVER)
+    assert (result.step_id, result.step, result.truncated, result.info) == expected
     assert len(transport.messages('camera/image_raw')) == images
 
 

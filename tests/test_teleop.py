@@ -45,7 +45,7 @@ def test_special_and_unknown_keys() -> None:
 
 def test_teleop_follows_step_ids_mode_and_light_kind() -> None:
     transport = FakeTransport()
-    node = ChamberNode(transport, SimConfig(), NodeParams(seed=1))
+    ChamberNode(transport, SimConfig(), NodeParams(seed=1))  # subscribes to the transport
     teleop = Teleop(transport)
 
     # The fake does not loop published messages back: hand the node's outputs to teleop.

@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _report(args: argparse.Namespace) -> None:
     print(f'GrowSpace env benchmark: {args.episodes} x 50-step episodes, best of {args.repeats}, '
-          f'1 CPU, steps per CPU second, numpy {np.__version__}, Python {sys.version.split()[0]}\n')
+          f'1 CPU, steps per CPU second, numpy {np.__version__}, '
+          f'Python {sys.version.split()[0]}\n')
     print('| challenge | env steps/s | (wall) | core steps/s | env/core | reset ms '
           '| segments at step 50 | target |')
     print('|---|---|---|---|---|---|---|---|')
@@ -114,7 +115,8 @@ def _report(args: argparse.Namespace) -> None:
                                                 args.seed)
         core = best_of(args.repeats, run_core, challenge, args.episodes, args.seed)
         target = TARGETS.get(challenge)
-        verdict = '' if target is None else f'>= {target:,}: {"met" if rate >= target else "NOT met"}'
+        verdict = '' if target is None else \
+            f'>= {target:,}: {"met" if rate >= target else "NOT met"}'
         print(f'| {challenge} | {rate:,.0f} | {wall:,.0f} | {core:,.0f} | {rate / core:.2f} | '
               f'{reset_s * 1e3:.2f} | {segments:.1f} | {verdict} |')
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -157,4 +157,3 @@ class RclpyTransport:
             error = propose(changes)
             return SetParametersResult(successful=error is None, reason=error or '')
         self.node.add_on_set_parameters_callback(check)
-
