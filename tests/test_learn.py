@@ -1,0 +1,148 @@
+"""Learned baselines (growspace_sim.learn): smoke training per algorithm, checkpoints, eval table.
+
+Needs the learn extra (requirements-learn.txt); without torch / Stable-Baselines3 the module is
+skipped. Runs are a few hundred steps on one torch thread; the long run is marked ``slow``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip('torch')
+pytest.importorskip('stable_baselines3')
+pytest.importorskip('pandas')
+
+import gymnasium as gym  # noqa: E402
+
+import growspace_sim  # noqa: E402, F401
+from growspace_sim.learn import evaluate_policies, train  # noqa: E402
+from growspace_sim.learn.networks import GrowSpaceCNN  # noqa: E402
+
+ENV = 'GrowSpace/Control-Easy-v0'
+# Small enough for a few hundred steps; each algorithm still runs several updates.
+SMOKE_HP = {
+    'ppo': {'n_steps': 64, 'batch_size': 32, 'n_epochs': 2},
+    'a2c': {},
+    'dqn': {'buffer_size': 500, 'learning_starts': 100, 'target_update_interval': 100},
+    'rainbow': {'buffer_size': 500, 'learning_starts': 100, 'target_update_interval': 100},
+}
+LOSS_KEYS = {'ppo': ['train/loss'], 'a2c': ['train/policy_loss', 'train/value_loss'],
+             'dqn': ['train/loss'], 'rainbow': ['train/loss']}
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    torch.set_num_threads(1)  # other processes share the cores: more threads is ~100x slower
+
+
+def _smoke_run(algo, out, steps=300):
+    return train.train(algo, ENV, steps, seed=0, out=out, n_envs=1, device='cpu',
+                       hp=SMOKE_HP[algo], checkpoint_every=100, progress_bar=False,
+                       log_interval=1)
+
+
+@pytest.mark.parametrize('algo', sorted(train.ALGOS))
+def test_smoke_training_has_finite_loss_and_checkpoints_load_and_act(algo, tmp_path):
+    run = _smoke_run(algo, tmp_path / algo)
+
+    with open(run / 'progress.csv', newline='') as f:
+        rows = list(csv.DictReader(f))
+    for key in LOSS_KEYS[algo]:
+        losses = [float(r[key]) for r in rows if r.get(key)]
+        assert losses, f'{algo}: no {key} logged'
+        assert all(math.isfinite(v) for v in losses), f'{algo}: {key} = {losses}'
+    with open(run / 'episodes.csv', newline='') as f:
+        episodes = list(csv.DictReader(f))
+    assert len(episodes) >= 5 and all(int(e['length']) == 50 for e in episodes)
+    info = json.loads((run / 'run.json').read_text())
+    assert info['algo'] == algo and info['steps'] >= 300
+
+    checkpoints = sorted((run / 'checkpoints').glob(f'{algo}_*_steps.zip'))
+    assert checkpoints, 'no checkpoint written'
+    env = gym.make(ENV)
+    observation, _ = env.reset(seed=1)
+    for path in (checkpoints[-1], run):
+        model = train.load_model(path)
+        for deterministic in (True, False):
+            action, _ = model.predict(observation, deterministic=deterministic)
+            assert env.action_space.contains(int(action))
+    env.close()
+
+
+def test_ppo_defaults_are_the_papers():
+    assert train.DEFAULTS['ppo'] == dict(
+        learning_rate=2.5e-4, n_steps=2500, batch_size=32, n_epochs=4, gamma=0.99,
+        gae_lambda=0.95, clip_range=0.1, ent_coef=0.01, max_grad_norm=0.5)
+
+
+@pytest.mark.parametrize('shape', [(3, 84, 84), (3, 28, 28)])
+def test_cnn_encoder_handles_both_observation_sizes(shape):
+    space = gym.spaces.Box(0, 255, shape, np.uint8)
+    encoder = GrowSpaceCNN(space, features_dim=64)
+    assert encoder(torch.zeros(2, *shape)).shape == (2, 64)
+
+
+def test_rainbow_projection_keeps_probability_mass(tmp_path):
+    run = _smoke_run('rainbow', tmp_path / 'rb', steps=200)
+    model = train.load_model(run)
+    probs = model.q_net.dist(torch.zeros(4, 3, 84, 84))
+    assert probs.shape == (4, 5, 51)
+    torch.testing.assert_close(probs.sum(dim=2), torch.ones(4, 5))
+
+
+def test_hp_parsing_and_cli_errors():
+    assert train.parse_hp(['n_steps=500', 'clip_range=0.2', 'policy=x']) == {
+        'n_steps': 500, 'clip_range': 0.2, 'policy': 'x'}
+    with pytest.raises(ValueError, match='key=value'):
+        train.parse_hp(['n_steps'])
+    with pytest.raises(SystemExit):
+        train.main(['--env', 'GrowSpace/Nope-v0', '--steps', '10'])
+
+
+def test_eval_table_on_a_tiny_budget_has_the_expected_columns(tmp_path):
+    run = _smoke_run('ppo', tmp_path / 'ppo', steps=128)
+    out = tmp_path / 'eval'
+    assert evaluate_policies.main(['--run', str(run), '--episodes', '2', '--out', str(out)]) == 0
+
+    with open(out / 'results.csv', newline='') as f:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+    assert tuple(reader.fieldnames) == evaluate_policies.COLUMNS == (
+        'case', 'env', 'agent', 'runs', 'episodes', 'steps', 'mean', 'se')
+    assert [r['agent'] for r in rows] == ['random', 'oracle', 'ppo']
+    assert {r['case'] for r in rows} == {'control/easy'}
+    assert all(int(r['episodes']) == 2 and math.isfinite(float(r['mean'])) for r in rows)
+    assert (out / 'results.md').read_text().startswith('| case | agent |')
+    for figure in ('rewards.png', 'training.png'):
+        assert (out / figure).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    merged, _ = evaluate_policies.load_results(out)
+    assert [r.agent for r in merged] == [r['agent'] for r in rows]
+
+
+def test_training_through_the_ros_bridge(tmp_path):
+    pytest.importorskip('cyclonedds')
+    pytest.importorskip('growspace_gym_bridge')
+    run = train.train('ppo', ENV, 100, seed=0, out=tmp_path / 'bridge', n_envs=1,
+                      device='cpu', hp={'n_steps': 50, 'batch_size': 25, 'n_epochs': 1},
+                      progress_bar=False, log_interval=1, bridge=True)
+    info = json.loads((run / 'run.json').read_text())
+    assert info['bridge'] is True and info['steps'] >= 100
+    with open(run / 'progress.csv', newline='') as f:
+        losses = [float(r['train/loss']) for r in csv.DictReader(f) if r.get('train/loss')]
+    assert losses and all(math.isfinite(v) for v in losses)
+
+
+@pytest.mark.slow
+def test_ppo_learns_control_hard(tmp_path):
+    """About 3 minutes on one core: PPO (case-study settings) beats random on control hard."""
+    env_id = 'GrowSpace/Control-Hard-v0'
+    run = train.train('ppo', env_id, 30_000, seed=0, out=tmp_path / 'ppo', n_envs=8,
+                      device='cpu', hp={'n_steps': 256, 'batch_size': 64}, progress_bar=False)
+    results = evaluate_policies.evaluate_env(env_id, [str(run)], episodes=20)
+    rows = {r.agent: r for r in evaluate_policies.rows_for(env_id, results)}
+    assert rows['ppo'].mean - rows['ppo'].se > rows['random'].mean + rows['random'].se
