@@ -2,9 +2,10 @@
 
 The oracles follow the GrowSpace paper's appendix and read the privileged chamber state (target,
 plant nodes) that a learning agent only sees as pixels:
-- control / find_plant: keep the plant's node nearest to the target inside the widest beam,
-  shifted towards the target so mostly photons on the target's side are lit; close to the
-  target, light only the reachable photon nearest to it;
+- control / find_plant: while the plant's node nearest to the target and the target share the
+  beam, leave the light alone; otherwise steer the widest beam over that node, shifted towards
+  the target so mostly photons on the target's side are lit; close to the target, light only the
+  reachable photon nearest to it with the narrowest beam;
 - fairness: one wide beam over all plants when it can reach them all; otherwise bring one plant
   at a time below the target, so the light alternates between the plants;
 - shape: fill the digit bottom-up, keeping the spotlight on the lowest digit pixel that the
@@ -24,6 +25,7 @@ from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 
 LEAD = 0.4  # of the beam width: how far ahead of the plant, towards the target, the beam centre is
 ARRIVAL = 0.15  # of the chamber width: a plant this close to below the target has arrived
+CLOSE_IN = 3.0  # branch lengths: this close to the target, aim single photons at it
 
 
 class Agent(Protocol):
@@ -66,10 +68,17 @@ class OracleAgent:
             lead = leads[self._fairness_focus(chamber, leads)]
         else:
             lead = leads[0]
-            photon = _photon_nearest_target(chamber)
+            near = abs(lead - chamber.target) < CLOSE_IN * cfg.branch_length_m
+            photon = _photon_nearest_target(chamber) if near else None
             if photon is not None and abs(photon - chamber.target) < abs(lead - chamber.target):
                 # Close in: light only the reachable photon that lies nearest to the target.
-                return _beam_action(chamber, photon.real, cfg.width_m(cfg.light_width))
+                return _beam_action(chamber, photon.real, cfg.width_m(cfg.light_width_min))
+            half = 0.5 * chamber.light.width
+            if abs(chamber.target.real - chamber.light.x) <= half \
+                    and abs(lead.real - chamber.light.x) <= half:
+                # Lead and target share the beam: leave it. Moving or widening it would feed
+                # side branches, which take growth slots (max_branching) from the lead.
+                return BEAM_ACTIONS.index('stay')
         goal = lead.real + float(np.clip(chamber.target.real - lead.real, -margin, margin))
         return _beam_action(chamber, goal, widest)
 
