@@ -20,7 +20,7 @@ costs (photons x new nodes) instead of (lit photons x all nodes).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,9 +31,8 @@ from growspace_sim.core.tasks import distance_reward, draw_layout, jaccard
 _DIRECTION_EPS = 1e-12  # a sum of unit vectors this short has no direction: the bud stays
 
 
-@dataclass(frozen=True)
-class StepOutcome:
-    """What one step produced."""
+class StepOutcome(NamedTuple):
+    """What one step produced (a named tuple: built on every step, it must be cheap)."""
 
     reward: float  # the challenge's reward for this step
     plant_rewards: np.ndarray  # (n_plants,) float64; per-plant reward (target challenges)
