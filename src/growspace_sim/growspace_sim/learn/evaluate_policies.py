@@ -26,6 +26,7 @@ from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -154,15 +155,29 @@ def write_csv(rows: list[Row], path: Path) -> None:
             writer.writerow([getattr(r, c) for c in COLUMNS])
 
 
-def plot_rewards(curves: dict[str, dict[str, dict]], path: Path) -> None:
-    """One panel per eval env: cumulative reward vs step, mean ± 1 s.d. (the paper's figure)."""
+def _panels(n: int) -> tuple[Any, Any]:
+    """A figure with one small panel per case, four per row; unused panels hidden."""
     import matplotlib  # noqa: PLC0415
-    matplotlib.use('Agg')
+    matplotlib.use('Agg')  # files only, no display
     import matplotlib.pyplot as plt  # noqa: PLC0415
-    n = len(curves)
     cols = min(n, 4)
     rows = math.ceil(n / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False)
+    for ax in list(axes.flat)[n:]:
+        ax.axis('off')
+    return fig, axes
+
+
+def _save(fig: Any, path: Path) -> None:
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_rewards(curves: dict[str, dict[str, dict]], path: Path) -> None:
+    """One panel per eval env: cumulative reward vs step, mean ± 1 s.d. (the paper's figure)."""
+    fig, axes = _panels(len(curves))
     for ax, (env_id, results) in zip(axes.flat, curves.items()):
         for label, entry in results.items():
             cumulative = np.cumsum(np.concatenate(entry['rewards']), axis=1)
@@ -175,22 +190,12 @@ def plot_rewards(curves: dict[str, dict[str, dict]], path: Path) -> None:
         ax.set_xlabel('step')
         ax.set_ylabel('cumulative reward')
         ax.legend(fontsize=7)
-    for ax in list(axes.flat)[n:]:
-        ax.axis('off')
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def plot_training(groups: dict[str, list[str]], path: Path, bins: int = 30) -> None:
     """Training return vs env steps, binned, mean ± s.d. over the runs of each group."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt  # noqa: PLC0415
-    n = len(groups)
-    cols = min(n, 4)
-    rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False)
+    fig, axes = _panels(len(groups))
     for ax, (title, runs) in zip(axes.flat, groups.items()):
         for label, run_list in _by_label(runs).items():
             curves, edges = [], None
@@ -217,11 +222,7 @@ def plot_training(groups: dict[str, list[str]], path: Path, bins: int = 30) -> N
         ax.set_xlabel('env steps')
         ax.set_ylabel('training episode return')
         ax.legend(fontsize=7)
-    for ax in list(axes.flat)[n:]:
-        ax.axis('off')
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _by_label(runs: list[str]) -> dict[str, list[str]]:
