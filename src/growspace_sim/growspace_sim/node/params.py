@@ -310,5 +310,8 @@ def to_yaml(values: dict[str, Any] | None = None, node_name: str = '/**') -> str
         if isinstance(value, float):
             text = repr(value)  # 0.0-style, so ROS types it as a double
         comment = f'  # {spec.description}' if spec.description else ''
-        lines.append(f'    {spec.name}: {text}{comment}')
+        # ROS 2's params-file parser cannot type an empty list, so an empty default is left as
+        # a comment (unset means the same); give a non-empty list to use it.
+        unset = '# ' if isinstance(value, (list, tuple)) and not value else ''
+        lines.append(f'    {unset}{spec.name}: {text}{comment}')
     return '\n'.join(lines) + '\n'
