@@ -1,7 +1,7 @@
 """Record chamber topics to MCAP the way rosbag2 does (profile ``ros2``), and recover broken files.
 
 A recording is one bare ``.mcap`` file that Jazzy ``ros2 bag info/play``, Foxglove, ``rosbags``
-and ``mcap_ros2`` read (design/ros2-interop.md section 3):
+and ``mcap_ros2`` read (the rosbag2 MCAP storage conventions, docs/recording.md):
 
 - header profile ``ros2``; one ``ros2msg`` schema per type (the concatenated definition from
   ``ros.types.msgdef``); channels with ``message_encoding='cdr'`` and the metadata
