@@ -131,6 +131,17 @@ class Chamber:
         distances = np.abs(self.photons[:, None] - self.pos[:self.n_nodes])
         self._nearest_node = distances.argmin(axis=1)  # ties go to the older node
         self._nearest_distance = distances[np.arange(self.photons.size), self._nearest_node]
+        self._refresh_available()
+
+    def _refresh_available(self) -> None:
+        """Flag the photons that would attract if lit: a node within reach, nothing above.
+
+        Both only change when the plant grows, so a step without growth only slices this.
+        """
+        available = self._nearest_distance < self._influence
+        if self.cfg.shading:
+            available &= self._canopy[self._photon_column] <= self.photons.imag
+        self._available = available
 
     def _x_range(self, low: float, high: float) -> slice:
         """The photons with low <= x <= high."""
@@ -171,11 +182,10 @@ class Chamber:
         half_span = light.radius if light.spot else 0.5 * light.width
         span = self._x_range(light.x - half_span, light.x + half_span)
         photons, distance = self.photons[span], self._nearest_distance[span]
-        attracting = distance < self._influence  # its nearest node is within reach
-        if cfg.shading:
-            attracting &= self._canopy[self._photon_column[span]] <= photons.imag
+        attracting = self._available[span]  # a view: read only
         if light.spot:
-            attracting &= np.abs(photons - complex(light.x, light.z)) <= light.radius
+            attracting = attracting & (np.abs(photons - complex(light.x, light.z))
+                                       <= light.radius)
         if not attracting.any():
             return 0
         nodes = self._nearest_node[span][attracting]
@@ -235,6 +245,7 @@ class Chamber:
             self._nearest_node = self._nearest_node[alive]
             self._nearest_distance = self._nearest_distance[alive]
         self._shade(a, b)
+        self._refresh_available()
 
     def _shade(self, a: np.ndarray, b: np.ndarray) -> None:
         """Raise the canopy (top of the plant per column) over the segments a-b.
