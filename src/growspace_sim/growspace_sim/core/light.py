@@ -40,9 +40,8 @@ def initial_light(cfg: SimConfig, x: float, z: float) -> Light:
     return light
 
 
-def clamp(light: Light, cfg: SimConfig) -> bool:
-    """Bring the light back inside its limits; returns True if anything had to change."""
-    before = (light.x, light.z, light.width, light.radius)
+def clamp(light: Light, cfg: SimConfig) -> None:
+    """Bring the light back inside its limits."""
     w, h = cfg.chamber_width, cfg.chamber_height
     if light.spot:
         light.radius = _clip(light.radius, cfg.width_m(cfg.spot_radius_min),
@@ -54,7 +53,6 @@ def clamp(light: Light, cfg: SimConfig) -> bool:
                             cfg.width_m(cfg.light_width_max))
         half = 0.5 * light.width
         light.x = _clip(light.x, half, w - half)
-    return before != (light.x, light.z, light.width, light.radius)
 
 
 def apply_discrete(light: Light, action: int, cfg: SimConfig) -> None:
