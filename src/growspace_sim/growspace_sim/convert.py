@@ -8,14 +8,13 @@ reads them here, so the topics carry the same bytes whichever way they were prod
 from __future__ import annotations
 
 import functools
-import math
 from typing import Any
 
 import numpy as np
 
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import CHALLENGES, SETTINGS
-from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS, Light
+from growspace_sim.core.light import Light
 from growspace_sim.ros import types
 
 IMAGE = 'sensor_msgs/msg/Image'
@@ -111,10 +110,7 @@ def apply_command(sim: Any, msg: Any) -> None:
     """
     spot = sim.chamber.light.spot
     mode = int(msg.mode)
-    if mode == MODE_DISCRETE:
-        names = SPOT_ACTIONS if spot else BEAM_ACTIONS
-        if not 0 <= msg.action < len(names):
-            _reject('action', msg.action, f'an int in [0, {len(names) - 1}] ({", ".join(names)})')
+    if mode == MODE_DISCRETE:  # the light module checks actions and coordinates
         sim.apply_discrete(int(msg.action))
     elif mode == MODE_CONTINUOUS:
         sim.apply_continuous(np.asarray(msg.continuous, np.float64))
@@ -123,13 +119,9 @@ def apply_command(sim: Any, msg: Any) -> None:
             _reject('mode', mode, f'{MODE_SPOT if spot else MODE_BEAM} (this challenge has a '
                     f'{"spotlight" if spot else "beam"}), {MODE_DISCRETE} or {MODE_CONTINUOUS}')
         light = sim.chamber.light
-        values = {'x': msg.x, 'z': msg.z if spot else light.z,
-                  'width': light.width if spot else msg.width,
-                  'radius': msg.radius if spot else light.radius}
-        for name in ('x', 'z', 'width', 'radius'):
-            if not math.isfinite(values[name]):
-                _reject(name, values[name], 'a finite number of metres')
-        sim.place_light(**values)
+        sim.place_light(x=msg.x, z=msg.z if spot else light.z,
+                        width=light.width if spot else msg.width,
+                        radius=msg.radius if spot else light.radius)
     else:
         _reject('mode', mode, f'{MODE_BEAM} (beam), {MODE_SPOT} (spot), {MODE_DISCRETE} '
                 f'(discrete action) or {MODE_CONTINUOUS} (continuous action)')

@@ -194,13 +194,9 @@ class ChamberNode:
                           f'{EPISODE_OVER}.')
             self._publish_result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
             return
-        try:
-            _apply(self.sim, msg)
-        except ValueError as e:
-            field = str(e).split(' ', 1)[0]
-            self.log.warn(f'command:{field}', f'light/command: step_id {step_id} not stepped: '
-                          f'{e}')
-            self._publish_result(step_id, self.reset_id, info=f'error: {e}')
+        error = self._apply_or_warn(msg, f'step_id {step_id} not stepped')
+        if error:
+            self._publish_result(step_id, self.reset_id, info=error)
             return
         self._step(step_id)
 
@@ -211,16 +207,19 @@ class ChamberNode:
                 self._reset(None, self.pending_cfg or self.cfg, self.reset_id)
             return
         msg, self._latest = self._latest, None
-        info = ''
-        if msg is not None:
-            try:
-                _apply(self.sim, msg)
-            except ValueError as e:
-                field = str(e).split(' ', 1)[0]
-                self.log.warn(f'command:{field}', f'light/command: ignored, the light stays: '
-                              f'{e}')
-                info = f'error: {e}'
+        info = '' if msg is None else self._apply_or_warn(msg, 'ignored, the light stays')
         self._step(0, info)
+
+    def _apply_or_warn(self, msg: Any, consequence: str) -> str:
+        """Apply a LightCommand; if it is bad, warn (throttled per field) and return the error
+        text for the StepResult, else ''."""
+        try:
+            _apply(self.sim, msg)
+        except ValueError as e:
+            field = str(e).split(' ', 1)[0]
+            self.log.warn(f'command:{field}', f'light/command: {consequence}: {e}')
+            return f'error: {e}'
+        return ''
 
     def _step(self, step_id: int, info: str = '') -> None:
         self.outcome = self.sim.step()
