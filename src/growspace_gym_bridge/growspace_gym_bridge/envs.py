@@ -17,6 +17,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.envs import as_action_index, spaces_for
 from growspace_sim.node import params as node_params_mod
 from growspace_sim.node.chamber_node import EPISODE_OVER
+from growspace_sim.ros import loopback
 
 from growspace_gym_bridge.errors import BridgeError, CommandRejected, NodeDied
 from growspace_gym_bridge.link import ChamberLink, Reply
@@ -27,8 +28,8 @@ CONNECT_TIMEOUT_S = 60.0  # node start-up (imports, typestore) plus discovery [s
 PRESENCE_CHECK_S = 0.5  # how often an attached node's presence is checked while waiting [s]
 _COUNTER = itertools.count(1)
 
-# Cyclone DDS does not survive fork() with a live participant: a child that uses the copy
-# hangs on close. Count ours, so a forked child can be told to use 'spawn' instead of hanging.
+# A DDS participant does not survive fork(): a child that uses the copy can hang. Count ours,
+# so a forked child can be told to use 'spawn' instead of hanging.
 _live_transports = 0
 _forked_with_live_dds = False
 
@@ -59,8 +60,10 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
     ``step_result`` with their ids plus the ``camera/image_raw``, ``plant/state`` and
     ``light/state`` messages of the same step (same header stamp). Late or duplicate replies
     are dropped by id. Without ``namespace`` the env starts its own node (a child process in a
-    unique namespace, loopback DDS) and stops it on ``close``; with one it attaches to a running
-    lockstep node (one client per node: another client's resets would move the chamber).
+    unique namespace, confined to loopback like everything we start) and stops it on
+    ``close``; with one it attaches to a running lockstep node (one client per node: another
+    client's resets would move the chamber). The env talks through its own rclpy context and
+    executor, so it leaves an application's rclpy state and signal handlers alone.
 
     ## Action Space
     As the in-process env: ``Discrete(5)`` for the beam challenges (left, right, stay, wider,
@@ -159,7 +162,7 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
             self.cfg = cfg
             self.node = NodeProcess(self.namespace, {**values, **(node_params or {}),
                                                      'mode': 'lockstep'},
-                                    domain_id=domain_id, transport=self._transport_kind())
+                                    domain_id=domain_id)
         else:
             if node_params:
                 raise ValueError('node_params only apply to a node the env starts, got '
@@ -188,12 +191,6 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
             cfg, node_params_mod.NodeParams()).items()
             if hasattr(default, name) and getattr(default, name) != getattr(cfg, name)}
 
-    @staticmethod
-    def _transport_kind() -> str:
-        from growspace_sim.node.main import choose_transport
-
-        return choose_transport()
-
     def _attach(self, challenge: str | None, setting: str | None,
                 values: dict[str, Any]) -> SimConfig:
         config = self._connect()
@@ -221,8 +218,8 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
         if self.link is not None:
             return self.link.config or {}
         if _forked_with_live_dds:
-            raise BridgeError('this process was forked while a bridge env held a DDS '
-                              'participant, which Cyclone DDS does not survive; create '
+            raise BridgeError('this process was forked while a bridge env held a ROS 2 '
+                              'context, which DDS does not survive; create '
                               "AsyncVectorEnv(..., context='spawn') or 'forkserver'.")
         self._transport = self._make_transport()
         _live_transports += 1
@@ -230,18 +227,12 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
         return self.link.connect(self.connect_timeout_s)
 
     def _make_transport(self) -> Any:
+        from growspace_sim.node.rclpy_transport import RclpyTransport
+
+        if self.node is not None:  # our own node: our side stays on loopback as well
+            loopback.confine()
         name = f'gym_bridge_{os.getpid()}_{secrets.token_hex(4)}'
-        if self._transport_kind() == 'rclpy':
-            import rclpy
-
-            from growspace_sim.node.rclpy_transport import RclpyTransport
-
-            if not rclpy.ok():
-                rclpy.init()
-            return RclpyTransport(name, self.namespace)
-        from growspace_sim.node.transport import DdsTransport
-
-        return DdsTransport(name, self.namespace, self.domain_id)
+        return RclpyTransport(name, self.namespace, domain_id=self.domain_id)
 
     def _check_alive(self, describe: Callable[[], str]) -> None:
         if self.node is not None:

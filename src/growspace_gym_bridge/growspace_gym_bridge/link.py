@@ -16,7 +16,6 @@ from typing import Any, Callable
 
 import numpy as np
 from growspace_sim import convert
-from growspace_sim.node import transport as node_transport
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS, STRING
 from growspace_sim.ros import qos as ros_qos, types
 
@@ -25,9 +24,9 @@ RESULT, IMAGE, PLANT, LIGHT, CONFIG = 'step_result', 'camera/image_raw', 'plant/
 STATE_TOPICS = (PLANT, LIGHT)
 SPIN_S = 0.05  # longest blocking wait between two checks of the node's health [s]
 MAX_BUFFERED = 64  # outputs kept per topic while their StepResult is on its way
-# The node re-checks an output nobody read every UNMATCHED_RECHECK_S: until then it may skip
-# outputs for a reader that matched after its last check (chamber_node._wanted).
-SETTLE_S = node_transport.UNMATCHED_RECHECK_S + 0.05
+# Matching is seen by each side on its own: after ours, the node may still skip an output for a
+# reader it has not matched yet (chamber_node._wanted), so wait a little longer.
+SETTLE_S = 0.1
 
 _NO_FLOATS = np.zeros(0, np.float32)
 Liveness = Callable[[Callable[[], str]], None]  # raises NodeDied naming what was awaited
@@ -48,8 +47,8 @@ class ChamberLink:
     """Client endpoints of one chamber: send resets and commands, collect matching replies.
 
     Args:
-        transport: the middleware seam of ``growspace_sim.node`` (``DdsTransport``,
-            ``RclpyTransport`` or a fake), in the chamber's namespace.
+        transport: the middleware seam of ``growspace_sim.node`` (``RclpyTransport`` or an
+            in-process one), in the chamber's namespace.
         with_state: also read ``plant/state`` and ``light/state`` (for ``info``); without
             them the node does not even build them.
         liveness: called while waiting; raises if the node is known to be gone.
@@ -132,7 +131,7 @@ class ChamberLink:
         deadline = time.monotonic() + timeout_s
         pending = [*self.inputs, *self.outputs, CONFIG]
         while pending or self.config is None:
-            pending = [t for t in pending if not self._matched(t)]
+            pending = [t for t in pending if not self.transport.matched(t)]
             if not pending and self.config is not None:
                 break
             if time.monotonic() >= deadline:
@@ -148,12 +147,9 @@ class ChamberLink:
             self.transport.spin_once(min(SPIN_S, max(0.0, settle - time.monotonic())))
         return self.config
 
-    def _matched(self, topic: str) -> bool:
-        return endpoint_matched(self.transport, topic, writer=topic in self.inputs)
-
     def node_present(self) -> bool:
         """Whether the node's step_result writer is still matched (for attached nodes)."""
-        return self._matched(RESULT)
+        return self.transport.matched(RESULT)
 
     # --- requests ------------------------------------------------------------------------
 
@@ -237,22 +233,3 @@ class ChamberLink:
                 for old in [s for s in frames if s <= stamp]:
                     del frames[old]
         return reply
-
-
-def endpoint_matched(transport: Any, topic: str, writer: bool) -> bool:
-    """Whether our endpoint on ``topic`` matches one of another participant.
-
-    Args:
-        transport: ``DdsTransport`` or ``RclpyTransport`` (anything else counts as matched).
-        topic: relative topic name.
-        writer: True for our publishers, False for our subscriptions.
-    """
-    if hasattr(transport, 'ctx'):  # DdsTransport
-        if writer:
-            return transport.wait_for_subscribers(topic, 1, 0.0)
-        return transport.publisher_count(topic) > 0
-    if hasattr(transport, 'node'):  # RclpyTransport: count endpoints in the ROS graph
-        name = transport.resolve(topic)
-        count = transport.node.count_subscribers if writer else transport.node.count_publishers
-        return count(name) > 0
-    return True

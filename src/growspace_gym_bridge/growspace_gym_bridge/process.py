@@ -12,6 +12,7 @@ from typing import Any, Mapping
 import weakref
 
 import growspace_sim
+from growspace_sim.ros import loopback
 
 import growspace_gym_bridge
 
@@ -68,29 +69,21 @@ class NodeProcess:
         namespace: ROS namespace of the chamber, e.g. ``/growspace_bridge_1``.
         params: node parameters (``SimConfig`` fields and node settings) as Python values.
         domain_id: ROS_DOMAIN_ID for the child; inherited when None.
-        transport: GROWSPACE_TRANSPORT for the child ('dds' or 'rclpy'); inherited when None.
         stop_timeout_s: grace period between SIGTERM and SIGKILL [s].
     """
 
     def __init__(self, namespace: str, params: Mapping[str, Any], *,
-                 domain_id: int | None = None, transport: str | None = None,
-                 stop_timeout_s: float = STOP_TIMEOUT_S) -> None:
-        from growspace_sim.ros.dds import LOOPBACK_CONFIG
-
+                 domain_id: int | None = None, stop_timeout_s: float = STOP_TIMEOUT_S) -> None:
         self.namespace = namespace
         args = ['--ros-args', '-r', f'__ns:={namespace}']
         for name, value in params.items():
             args += ['-p', f'{name}:={ros_value(value)}']
         self.argv = [sys.executable, '-m', 'growspace_gym_bridge.launcher', *args]
-        env = dict(os.environ)
+        env = loopback.confined_env()  # the network rule: a node we start stays on loopback
         env['PYTHONPATH'] = os.pathsep.join(
             _package_roots() + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
-        if not env.get('CYCLONEDDS_URI'):
-            env['CYCLONEDDS_URI'] = LOOPBACK_CONFIG  # the network rule: loopback, no multicast
         if domain_id is not None:
             env['ROS_DOMAIN_ID'] = str(domain_id)
-        if transport is not None:
-            env['GROWSPACE_TRANSPORT'] = transport
         env[PARENT_ENV] = str(os.getpid())
         # A file, not a pipe: nobody has to drain it, and a chatty node never blocks on it.
         self._stderr = tempfile.TemporaryFile()

@@ -1,8 +1,8 @@
 """Simulation state <-> ROS 2 messages: the only module that knows both the core and the msgs.
 
 Messages are rosbags dataclasses of the types parsed from ``growspace_msgs`` (see
-``growspace_sim.ros.types``); every adapter (DDS node, rclpy node, recorder, replay) builds and
-reads them here, so the topics carry the same bytes whichever way they were produced.
+``growspace_sim.ros.types``); every adapter (rclpy and in-process node, recorder, replay)
+builds and reads them here, so the topics carry the same bytes whichever way they were produced.
 """
 
 from __future__ import annotations

@@ -2,9 +2,9 @@
 
 1. The oracle plays one episode of each challenge on the chamber node, in process; the node
    records every message to ``bags/demo-<time>/oracle.mcap``.
-2. A ``sim_node`` process on Cyclone DDS (loopback only) records itself to
+2. A real ROS 2 ``sim_node`` process (rclpy, Fast DDS, confined to loopback) records itself to
    ``bags/demo-<time>/bridge.mcap`` while a random agent plays one control episode through the
-   Gymnasium bridge, over ROS 2 topics.
+   Gymnasium bridge, over its topics.
 3. Both recordings are re-simulated from their seeds and commands and must match bit for bit;
    every episode is exported as a GIF next to them.
 """
@@ -23,6 +23,7 @@ from growspace_sim.agents import OracleAgent, RandomAgent
 from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
+from growspace_sim.ros import loopback
 
 
 def record_oracle(path: Path, setting: str, seed: int) -> None:
@@ -38,7 +39,7 @@ def record_oracle(path: Path, setting: str, seed: int) -> None:
 
 def record_bridged(path: Path, setting: str, seed: int) -> None:
     """A random agent plays control through the ROS bridge; the node records to ``path``."""
-    from growspace_gym_bridge.envs import GrowSpaceBridgeEnv  # DDS only for this part
+    from growspace_gym_bridge.envs import GrowSpaceBridgeEnv  # ROS 2 only for this part
 
     env = GrowSpaceBridgeEnv('control', setting, node_params={'record_path': str(path)})
     try:
@@ -76,8 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--setting', default='hard', choices=SETTINGS)
     parser.add_argument('--no-ros', action='store_true',
-                        help='skip the sim_node + bridge part (no DDS)')
+                        help='skip the sim_node + bridge part (no ROS 2)')
     args = parser.parse_args(argv)
+    loopback.confine()  # the network rule, for the node we start and our own side
     out = Path(args.out) / f'demo-{time.strftime("%Y%m%d-%H%M%S")}'
     out.mkdir(parents=True, exist_ok=False)  # a new directory: nothing is ever overwritten
     print(f'Recording to {out}/')

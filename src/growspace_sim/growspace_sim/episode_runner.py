@@ -2,7 +2,7 @@
 
 The runner is a lockstep client of a real ``ChamberNode`` on an in-memory transport
 (``node.local.LocalTransport``): it sends ResetRequests and LightCommands as a client would, and
-the node handles, publishes and records them exactly as it does on DDS or rclpy. So a recording
+the node handles, publishes and records them exactly as it does on rclpy. So a recording
 made here and one made by ``sim_node --ros-args -p record_path:=...`` have the same channels,
 message order, stamps and metadata, and re-simulate the same way; the sample bags, the recording
 tests and the benchmark use it. The message order and stamps are the node's (``node.interface``

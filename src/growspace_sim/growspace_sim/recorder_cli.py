@@ -4,9 +4,9 @@
   runs the chamber node in process (``episode_runner``), which records every message it handles:
   lossless, deterministic, re-simulatable with ``growspace-replay check``.
 - ``growspace-record subscribe OUT.mcap --namespace /growspace`` subscribes to a running
-  chamber over Cyclone DDS (loopback unless CYCLONEDDS_URI is set) until Ctrl-C, SIGTERM or
-  ``--duration``. A subscriber can miss messages the node published before it matched; the
-  node's own recording (its ``record_path`` parameter) is the lossless one.
+  chamber over rclpy until Ctrl-C, SIGTERM or ``--duration``. A subscriber can miss messages
+  the node published before it matched; the node's own recording (its ``record_path``
+  parameter) is the lossless one.
 
 SIGINT and SIGTERM finish the file (summary and indexes) before exiting.
 """
@@ -16,15 +16,16 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import time
+from typing import Any, Callable
 
-from growspace_sim import recording
+from growspace_sim import convert, recording
 from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
 from growspace_sim.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
 from growspace_sim.node.interface import TOPICS
-from growspace_sim.node.params import DEFAULT_NODE_NAME
-from growspace_sim.ros import names, types
+from growspace_sim.ros import names, qos as ros_qos
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,45 +65,41 @@ def run(args: argparse.Namespace) -> int:
 
 
 def subscribe(args: argparse.Namespace) -> int:
-    """Record a running chamber's topics over DDS; returns the exit status."""
-    from growspace_sim.ros import dds, qos as ros_qos
+    """Record a running chamber's topics over rclpy; returns the exit status."""
+    from growspace_sim.node.rclpy_transport import RclpyTransport
 
-    dds.ensure_loopback_config()
     namespace = names.normalize_namespace(args.namespace)
-    rank = {topic.name: i for i, topic in enumerate(TOPICS)}  # the node's handling order
     deadline = None if args.duration is None else time.monotonic() + args.duration
     count = 0
     with recording.stop_on_signals(), \
-            recording.McapRecorder(args.out, overwrite=args.overwrite) as recorder, \
-            dds.DdsContext('growspace_recorder', '/', args.domain_id) as ctx:
-        subs, channels = [], {}
-        for _, rel, typename, qos in TOPICS:
-            topic = names.resolve_topic(rel, DEFAULT_NODE_NAME, namespace)
-            # keep_all on the reader: a slow disk must not make DDS drop samples.
-            reader_qos = ros_qos.QosProfile(history='keep_all', durability=qos.durability)
-            subs.append((rel, ctx.create_subscription(typename, topic, reader_qos)))
-            channels[rel] = recorder.add_channel(topic, typename, qos)
+            recording.McapRecorder(args.out, overwrite=args.overwrite) as recorder:
+        transport = RclpyTransport(f'growspace_recorder_{os.getpid()}', namespace,
+                                   domain_id=args.domain_id)
         have_metadata = False
-        try:
-            while deadline is None or time.monotonic() < deadline:
-                subs[-1][1].wait(0.001)
-                batch = []
-                for rel, sub in subs:
-                    for data, msg in sub.take(256):
-                        if isinstance(msg, types.CdrError):
-                            continue
-                        batch.append((rank[rel], rel, data, msg))
+
+        def record(rel: str, channel: int) -> Callable[[Any, bytes], None]:
+            def write(msg: Any, cdr: bytes) -> None:
+                nonlocal count, have_metadata
+                if rel == 'chamber/config' and not have_metadata:
+                    have_metadata = _write_metadata(recorder, msg.data, namespace)
                 now = time.time_ns()
-                for _, rel, data, msg in sorted(batch, key=lambda item: item[0]):
-                    if rel == 'chamber/config' and not have_metadata:
-                        have_metadata = _write_metadata(recorder, msg.data, namespace)
-                    header = getattr(msg, 'header', None)
-                    sent = now if header is None else (
-                        int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec))
-                    recorder.write(channels[rel], data, now, sent)
-                    count += 1
+                header = getattr(msg, 'header', None)
+                sent = now if header is None else convert.to_ns(header.stamp)
+                recorder.write(channel, cdr, now, sent)
+                count += 1
+            return write
+        try:
+            for _, rel, typename, qos in TOPICS:
+                channel = recorder.add_channel(transport.resolve(rel), typename, qos)
+                # keep_all on the reader: a slow disk must not make the middleware drop samples.
+                reader_qos = ros_qos.QosProfile(history='keep_all', durability=qos.durability)
+                transport.subscribe(typename, rel, reader_qos, record(rel, channel))
+            while deadline is None or time.monotonic() < deadline:
+                transport.spin_once(0.05)
         except KeyboardInterrupt:
             pass
+        finally:
+            transport.close()
     print(f'recorded {count} messages to {args.out}')
     return 0
 
@@ -136,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument('--realtime', action='store_true', help='pace steps at rate-hz')
     p_run.add_argument('--namespace', default=DEFAULT_NAMESPACE)
     p_run.add_argument('--overwrite', action='store_true')
-    p_sub = sub.add_parser('subscribe', help="record a running chamber's topics over DDS")
+    p_sub = sub.add_parser('subscribe', help="record a running chamber's topics over ROS 2")
     p_sub.add_argument('out')
     p_sub.add_argument('--namespace', default=DEFAULT_NAMESPACE)
     p_sub.add_argument('--duration', type=float, help='seconds; default: until Ctrl-C')

@@ -6,8 +6,8 @@
   report whether every image, plant state, applied light and reward is bit-identical (exit 0)
   or the first mismatch (exit 1);
 - ``export BAG OUT.gif|OUT.mp4``: one episode's camera images, with a progress bar;
-- ``play BAG``: republish the messages on their topics over Cyclone DDS (loopback unless
-  CYCLONEDDS_URI says otherwise), with the recorded timing or as fast as possible;
+- ``play BAG``: republish the messages on their topics over rclpy, with the recorded timing or
+  as fast as possible (``ros2 bag play`` where rosbag2 is not installed);
 - ``recover BAG OUT``: copy the complete chunks of a file cut short by a crash.
 
 Messages are read in file order, which is the order the node handled them in (the topics and
@@ -673,7 +673,7 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
 def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[str] | None = None,
          domain_id: int | None = None, wait_for_subscribers_s: float = 0.0,
          log: Callable[[str], None] | None = None) -> int:
-    """Republish a recording on its topics over Cyclone DDS (ROS 2 wire conventions).
+    """Republish a recording on its topics over rclpy (``ros2 bag play`` without rosbag2).
 
     On a machine with ROS 2, ``ros2 bag play BAG`` does the same through rmw.
 
@@ -682,7 +682,7 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
         rate: Speed factor on the recorded log times (1.0 = original timing); None = as fast
             as possible.
         topics: Only these recorded topic names; None = all.
-        domain_id: DDS domain; None = ROS_DOMAIN_ID.
+        domain_id: ROS domain; None = ROS_DOMAIN_ID.
         wait_for_subscribers_s: Before playing, wait up to this long for every publisher to
             match a subscriber.
         log: Where progress lines go (None = quiet).
@@ -695,33 +695,35 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
     """
     if rate is not None and not rate > 0:
         raise ReplayError(f'rate must be > 0, got {rate}.')
-    from growspace_sim.ros import dds
+    from growspace_sim.node.rclpy_transport import RclpyTransport
 
-    dds.ensure_loopback_config()
     count = 0
-    with Bag(path) as bag, dds.DdsContext('growspace_replay', '/', domain_id) as ctx:
-        wanted = set(bag.topics) if topics is None else set(topics) & set(bag.topics)
-        publishers = {t: ctx.create_publisher(bag.topics[t].typename, t, bag.topics[t].qos)
-                      for t in sorted(wanted)}
-        if wait_for_subscribers_s > 0:
+    with Bag(path) as bag:
+        transport = RclpyTransport(f'growspace_replay_{os.getpid()}', domain_id=domain_id)
+        try:
+            wanted = set(bag.topics) if topics is None else set(topics) & set(bag.topics)
+            publishers = {t: transport.raw_publisher(bag.topics[t].typename, t,
+                                                     bag.topics[t].qos)
+                          for t in sorted(wanted)}
             deadline = time.monotonic() + wait_for_subscribers_s
-            for pub in publishers.values():
-                pub.wait_for_subscribers(1, max(0.0, deadline - time.monotonic()))
-        start_wall = time.monotonic()
-        first_log: int | None = None
-        for msg in bag.messages(wanted):
-            if rate is not None:
-                first_log = msg.log_time if first_log is None else first_log
-                delay = start_wall + (msg.log_time - first_log) / 1e9 / rate - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-            publishers[msg.topic].publish_raw(msg.data)
-            count += 1
-            if log is not None and count % 500 == 0:
-                log(f'published {count} messages')
-        for pub in publishers.values():
-            if pub.qos.reliability == 'reliable':
-                pub.wait_for_acks(2.0)
+            while time.monotonic() < deadline and not all(map(transport.matched, publishers)):
+                transport.spin_once(0.02)
+            start_wall = time.monotonic()
+            first_log: int | None = None
+            for msg in bag.messages(wanted):
+                if rate is not None:
+                    first_log = msg.log_time if first_log is None else first_log
+                    delay = (start_wall + (msg.log_time - first_log) / 1e9 / rate
+                             - time.monotonic())
+                    if delay > 0:
+                        time.sleep(delay)
+                publishers[msg.topic](msg.data)
+                count += 1
+                if log is not None and count % 500 == 0:
+                    log(f'published {count} messages')
+            transport.flush(2.0)
+        finally:
+            transport.close()
     return count
 
 
@@ -746,7 +748,7 @@ def main(argv: list[str] | None = None) -> int:
     p_export.add_argument('--scale', type=int, default=4)
     p_export.add_argument('--namespace')
     p_export.add_argument('--overwrite', action='store_true')
-    p_play = sub.add_parser('play', help='republish on the topics over DDS')
+    p_play = sub.add_parser('play', help='republish on the topics over ROS 2')
     p_play.add_argument('bag')
     speed = p_play.add_mutually_exclusive_group()
     speed.add_argument('--rate', type=float, default=1.0, help='speed factor (1 = original)')

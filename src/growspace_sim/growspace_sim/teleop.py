@@ -1,9 +1,8 @@
 """Keyboard teleop for a chamber: arrow keys move the light, +/- resize it, r resets.
 
-Publishes ``LightCommand`` MODE_DISCRETE on ``light/command`` through the same transport as the
-node (rclpy when importable, else Cyclone DDS). In lockstep mode it sends the last step_id seen
-on ``step_result`` + 1; in realtime mode step_id 0. The mode and light kind come from the
-node's latched ``chamber/config`` and from ``light/state``.
+Publishes ``LightCommand`` MODE_DISCRETE on ``light/command`` over rclpy. In lockstep mode it
+sends the last step_id seen on ``step_result`` + 1; in realtime mode step_id 0. The mode and
+light kind come from the node's latched ``chamber/config`` and from ``light/state``.
 
 Usage: ``ros2 run growspace_sim teleop --ros-args -r __ns:=/chamber1`` or
 ``python -m growspace_sim.teleop --ros-args -r __ns:=/chamber1``.
@@ -13,7 +12,6 @@ from __future__ import annotations
 
 import curses
 import json
-import os
 import secrets
 import sys
 from typing import Any, Sequence
@@ -21,7 +19,6 @@ from typing import Any, Sequence
 from growspace_sim import convert
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
-from growspace_sim.node.params import parse_ros_args
 from growspace_sim.ros import qos as ros_qos, types
 
 QUIT, RESET = 'quit', 'reset'
@@ -125,41 +122,24 @@ def _loop(screen: Any, teleop: Teleop) -> None:
             return
 
 
-def make_transport(node_name: str, namespace: str) -> Any:
-    """rclpy transport when available (or GROWSPACE_TRANSPORT=rclpy), else Cyclone DDS."""
-    from growspace_sim.node.main import choose_transport
-
-    if choose_transport() == 'rclpy':
-        import rclpy
-
-        from growspace_sim.node.rclpy_transport import RclpyTransport
-
-        rclpy.init()
-        return RclpyTransport(node_name, namespace)
-    from growspace_sim.node.transport import DdsTransport
-
-    return DdsTransport(node_name, namespace)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``teleop``."""
+    """Console script ``teleop`` (``--ros-args -r __ns:=/chamber1`` picks the chamber)."""
+    from rclpy.executors import ExternalShutdownException
+
+    from growspace_sim.node.rclpy_transport import RclpyTransport
+
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        ros_args = parse_ros_args(argv)
-        transport = make_transport('growspace_teleop', ros_args.namespace)
-    except ValueError as e:
+        transport = RclpyTransport('growspace_teleop', args=['teleop', *argv])
+    except Exception as e:  # noqa: BLE001 - rcl's own message names the bad argument
         print(f'teleop: {e}', file=sys.stderr)
         return 2
     try:
         curses.wrapper(_loop, Teleop(transport))
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         transport.close()
-        if 'rclpy' in sys.modules and os.environ.get('GROWSPACE_TRANSPORT') != 'dds':
-            import rclpy
-
-            rclpy.try_shutdown()
     return 0
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import secrets
-from typing import Any, Iterable, Protocol
+from typing import Any, Callable, Iterable, Protocol
 
 import numpy as np
 
@@ -72,16 +72,20 @@ class ChamberNode:
         params: the node settings.
         recorder: receives every message's CDR bytes, or None.
         digit_source: where shape targets come from (see ``growspace_sim.digits``).
+        on_reconfigure: called with the new configuration when a reset changed it (the
+            rclpy node then shows the new challenge and setting in its parameters).
     """
 
     def __init__(self, transport: Transport, cfg: SimConfig, params: NodeParams | None = None,
-                 recorder: Recorder | None = None, digit_source: str = 'auto') -> None:
+                 recorder: Recorder | None = None, digit_source: str = 'auto',
+                 on_reconfigure: Callable[[SimConfig], None] | None = None) -> None:
         self.transport = transport
         self.log = transport.logger
         self.params = params or NodeParams()
         self.cfg = cfg
         self.digit_source = digit_source
         self.recorder = recorder
+        self.on_reconfigure = on_reconfigure
         self.recording_error: str | None = None  # why the recorder stopped, once it did
         self.sim = Simulation(cfg, digit_source)
         self.sim_time_ns = 0
@@ -235,6 +239,8 @@ class ChamberNode:
             # Without a seed the random stream continues, so the episode stays reproducible.
             sim.rng, sim.seed, sim.episode = self.sim.rng, self.sim.seed, self.sim.episode
             self.sim, self.cfg = sim, cfg
+            if self.on_reconfigure is not None:
+                self.on_reconfigure(cfg)
         self.pending_cfg = None
         self.outcome = self.sim.reset(seed=seed)
         self.seed = self.sim.seed

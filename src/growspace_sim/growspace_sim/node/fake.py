@@ -3,7 +3,7 @@
 ``LocalTransport`` already mirrors the real transports at the seam (messages serialised to the
 same CDR bytes, malformed bytes dropped before the callback, callback exceptions caught, services
 like rclpy); this adds the history, a warning log on the simulated clock and topics that can be
-marked unread, so tests of everything above the seam need neither DDS nor rclpy.
+marked unread, so tests of everything above the seam need no rclpy.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ class FakeTransport(LocalTransport):
     Args:
         node_name: ROS node name, for name resolution.
         namespace: ROS namespace.
-        services: whether ``serve`` succeeds (rclpy) or declines (DDS).
+        services: whether ``serve`` succeeds (rclpy) or declines.
         throttle_s: warning throttle period, in simulated seconds.
     """
 
@@ -61,7 +61,7 @@ class FakeTransport(LocalTransport):
         """Deliver a message to the subscriptions of ``topic`` as the middleware would.
 
         Unlike ``LocalTransport.inject`` the bytes are decoded again, so tests see exactly
-        what a node on DDS or rclpy would get.
+        what a node on rclpy would get.
 
         Returns:
             The CDR bytes delivered.

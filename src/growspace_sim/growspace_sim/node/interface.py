@@ -3,7 +3,7 @@
 One table for every producer and reader of chamber messages: ``ChamberNode`` subscribes and
 publishes from it, ``recording`` and ``recorder_cli`` name their channels from it and ``replay``
 finds a chamber's topics with it. The ``chamber/config`` payload and the recording's
-``growspace`` metadata record are built here too, so that the node (on DDS, on rclpy or in
+``growspace`` metadata record are built here too, so that the node (on rclpy or in
 process) is the only producer of both. Nothing here imports MCAP: a node that does not record
 does not need it.
 

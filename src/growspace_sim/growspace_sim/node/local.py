@@ -26,7 +26,7 @@ class LocalTransport:
     Args:
         node_name: ROS node name, for name resolution.
         namespace: ROS namespace.
-        services: whether ``serve`` succeeds (as rclpy) or declines (as DDS).
+        services: whether ``serve`` succeeds (as rclpy) or declines.
         logger: where warnings go; by default Python logging, throttled in wall time.
     """
 
@@ -77,6 +77,9 @@ class LocalTransport:
 
     def has_subscribers(self, topic: str) -> bool:
         return True  # in process, the caller reads every output
+
+    def matched(self, topic: str) -> bool:
+        return True  # the caller is the other end
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         if self._accept_services:

@@ -2,11 +2,8 @@
 
 The names, defaults and types come from ``SimConfig`` and ``NodeParams`` alone; the descriptions
 (with units) are the trailing comments of their fields, read from the source, so the ROS
-parameter descriptors and ``config/growspace.yaml`` cannot drift from the dataclasses.
-
-Without rclpy, ``parse_ros_args`` understands the subset of the ROS command line that
-``ros2 run`` and launch files use for this node: ``--ros-args``, ``-p name:=value``,
-``--params-file FILE``, ``-r __ns:=/ns`` and ``-r __node:=name`` (values are YAML, as in ROS).
+parameter descriptors and ``config/growspace.yaml`` cannot drift from the dataclasses. rcl parses
+the command line and params files; ``check_type`` and ``build`` validate what it found.
 """
 
 from __future__ import annotations
@@ -16,9 +13,8 @@ from dataclasses import dataclass
 import functools
 import inspect
 import math
-from pathlib import Path
 import re
-from typing import Any, Sequence
+from typing import Any
 
 import yaml
 
@@ -116,7 +112,7 @@ def defaults() -> dict[str, Any]:
             for s in specs()}
 
 
-def _check_type(spec: ParamSpec, value: Any) -> Any:
+def check_type(spec: ParamSpec, value: Any) -> Any:
     """Coerce a YAML value to the parameter's type as ROS would, or raise ParamError."""
     default = spec.default
     if isinstance(default, bool):
@@ -126,7 +122,7 @@ def _check_type(spec: ParamSpec, value: Any) -> Any:
         ok = isinstance(value, int) and not isinstance(value, bool)
         expected = 'an integer'
     elif isinstance(default, float):
-        # ROS would refuse an integer for a double; being lenient here costs nothing.
+        # rclpy would refuse `-p rate_hz:=20` for a double; an integer is a number too.
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
         expected = 'a number'
@@ -164,7 +160,7 @@ def build(values: dict[str, Any]) -> tuple[SimConfig, NodeParams]:
     for name, value in values.items():
         spec = by_name[name]
         target = sim_values if spec.owner is SimConfig else node_values
-        target[name] = _check_type(spec, value)
+        target[name] = check_type(spec, value)
     try:
         cfg = SimConfig.from_dict(sim_values)
         node = NodeParams(**node_values)
@@ -181,121 +177,6 @@ def as_values(cfg: SimConfig, node: NodeParams) -> dict[str, Any]:
             value = getattr(obj, field.name)
             out[field.name] = list(value) if isinstance(value, tuple) else value
     return out
-
-
-@dataclass
-class RosArgs:
-    """What ``parse_ros_args`` found on a command line."""
-
-    params: dict[str, Any]
-    node_name: str = DEFAULT_NODE_NAME
-    namespace: str = '/'
-    rest: list[str] = dataclasses.field(default_factory=list)  # the non-ROS arguments
-
-
-def _param_sections(doc: Any, node_name: str, namespace: str, path: str) -> dict[str, Any]:
-    if not isinstance(doc, dict):
-        raise ParamError(f'params file {path}: expected a mapping of node names, got {doc!r}.')
-    fq_name = namespace.rstrip('/') + '/' + node_name
-    wanted = {'/**', '**', node_name, '/' + node_name, fq_name, '/**/' + node_name}
-    merged: dict[str, Any] = {}
-    for key, section in doc.items():
-        if str(key) not in wanted:
-            continue
-        if not isinstance(section, dict) or 'ros__parameters' not in section:
-            raise ParamError(f'params file {path}: section {key!r} has no ros__parameters.')
-        merged.update(_flatten(section['ros__parameters'] or {}))
-    return merged
-
-
-def _flatten(tree: dict[str, Any], prefix: str = '') -> dict[str, Any]:
-    out = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            out.update(_flatten(value, f'{prefix}{key}.'))
-        else:
-            out[f'{prefix}{key}'] = value
-    return out
-
-
-def load_params_file(path: str | Path, node_name: str = DEFAULT_NODE_NAME,
-                     namespace: str = '/') -> dict[str, Any]:
-    """Read the parameters meant for this node from a ROS params file (``/**:`` etc.).
-
-    Raises:
-        ParamError: the file cannot be read or is not a ROS params file.
-    """
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as e:
-        raise ParamError(f'params file {path}: {e}') from None
-    return _param_sections(doc or {}, node_name, namespace, str(path))
-
-
-def _split_assignment(text: str, flag: str) -> tuple[str, str]:
-    name, sep, value = text.partition(':=')
-    if not sep or not name:
-        raise ParamError(f'{flag} expects name:=value, got {text!r}.')
-    return name, value
-
-
-def parse_ros_args(argv: Sequence[str]) -> RosArgs:
-    """Parse the ROS arguments of a command line (everything after ``--ros-args``).
-
-    Params files are applied first (in order), then ``-p`` values, as rcl does.
-
-    Raises:
-        ParamError: an argument this parser does not support, or a bad params file.
-    """
-    argv = list(argv)
-    rest: list[str] = []
-    files: list[str] = []
-    overrides: dict[str, Any] = {}
-    node_name, namespace = DEFAULT_NODE_NAME, '/'
-    in_ros = False
-    i = 0
-    while i < len(argv):
-        arg = argv[i]
-        i += 1
-        if arg == '--ros-args':
-            in_ros = True
-            continue
-        if not in_ros:
-            rest.append(arg)
-            continue
-        if arg == '--':
-            in_ros = False
-            continue
-        if arg in ('-p', '--param', '--params-file', '-r', '--remap', '--log-level'):
-            if i >= len(argv):
-                raise ParamError(f'{arg} needs a value.')
-            value = argv[i]
-            i += 1
-            if arg in ('-p', '--param'):
-                name, text = _split_assignment(value, arg)
-                try:
-                    overrides[name] = yaml.safe_load(text) if text else ''
-                except yaml.YAMLError:
-                    overrides[name] = text
-            elif arg == '--params-file':
-                files.append(value)
-            elif arg in ('-r', '--remap'):
-                name, text = _split_assignment(value, arg)
-                if name == '__ns':
-                    namespace = text
-                elif name == '__node':
-                    node_name = text
-                else:
-                    raise ParamError(f'remapping {value!r} is not supported without rclpy; '
-                                     f'only __ns:=/namespace and __node:=name are.')
-            continue  # --log-level is accepted and ignored
-        raise ParamError(f'ROS argument {arg!r} is not supported without rclpy; supported: '
-                         f'-p name:=value, --params-file FILE, -r __ns:=/ns, -r __node:=name.')
-    params: dict[str, Any] = {}
-    for path in files:
-        params.update(load_params_file(path, node_name, namespace))
-    params.update(overrides)
-    return RosArgs(params, node_name, namespace, rest)
 
 
 def to_yaml(values: dict[str, Any] | None = None, node_name: str = '/**') -> str:

@@ -1,4 +1,4 @@
-"""One-shot publisher without ROS: the equivalent of ``ros2 topic pub --once``.
+"""One-shot publisher on rclpy: ``ros2 topic pub --once`` where ros2cli is not installed.
 
 Example (the same YAML value as the ``ros2`` command line)::
 
@@ -7,12 +7,16 @@ Example (the same YAML value as the ``ros2`` command line)::
 
 Waits until a subscriber matched (up to ``--wait`` seconds), publishes once with the node's
 command QoS (reliable), and waits for the acknowledgement, so the message is not lost on exit.
+The value is checked against the type before anything starts: a misspelt field or a value of
+the wrong type is an error naming it (exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import time
 from typing import Sequence
 
 import yaml
@@ -37,16 +41,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, TypeError, KeyError, yaml.YAMLError) as e:
         print(f'pub: {e}', file=sys.stderr)
         return 2
-    from growspace_sim.ros import dds
+    from growspace_sim.node.rclpy_transport import RclpyTransport
 
-    with dds.DdsContext('growspace_pub') as ctx:
-        pub = ctx.create_publisher(args.type, args.topic, COMMAND_QOS)
-        if not pub.wait_for_subscribers(1, args.wait):
-            print(f'pub: no subscriber on {pub.topic} after {args.wait} s; publishing anyway',
+    transport = RclpyTransport(f'growspace_pub_{os.getpid()}')
+    try:
+        publish = transport.publisher(args.type, args.topic, COMMAND_QOS)
+        topic = transport.resolve(args.topic)
+        deadline = time.monotonic() + args.wait
+        while not transport.matched(args.topic) and time.monotonic() < deadline:
+            transport.spin_once(0.02)
+        if not transport.matched(args.topic):
+            print(f'pub: no subscriber on {topic} after {args.wait} s; publishing anyway',
                   file=sys.stderr)
-        pub.publish(msg)
-        pub.wait_for_acks(args.wait)
-    print(f'published on {pub.topic}: {types.to_plain(msg)}')
+        publish(msg)
+        transport.flush(args.wait)
+    finally:
+        transport.close()
+    print(f'published on {topic}: {types.to_plain(msg)}')
     return 0
 
 

@@ -1,23 +1,31 @@
-"""``Transport`` on rclpy, for a machine with ROS 2 Jazzy (never run in this project's CI).
+"""``Transport`` on rclpy: the one ROS 2 transport (node, bridge, teleop, recorder, replay, pub).
 
-Kept thin on purpose: messages cross it as CDR bytes, so no field-by-field conversion exists.
-A publisher serialises the rosbags message (``types.serialize``) and hands the bytes to
-``rclpy.Publisher.publish``, which publishes ``bytes`` as a serialized message; subscriptions
-are ``raw=True`` and decode with ``types.deserialize``; the reset service converts its request
-and response with ``rclpy.serialization``. The node logic above is tested through a fake of the
-same protocol (tests/test_node_logic.py).
+Messages cross it as CDR bytes, so no field-by-field conversion exists: a publisher serialises
+the rosbags message (``types.serialize``) and hands the bytes to ``rclpy.Publisher.publish``,
+which publishes ``bytes`` as a serialized message; subscriptions are ``raw=True`` and decode with
+``types.deserialize``; the reset service converts with ``rclpy.serialization``. The generated
+``growspace_msgs`` classes are only used to name the types (rcl needs their type support).
+
+Each transport owns one executor for its whole life (rclpy's ``EventsExecutor`` where it
+exists: rebuilding a wait set on every ``spin_once`` was most of a bridge step's cost) and, for
+clients, its own ``rclpy.Context``, so a bridge env or a recorder never touches an application's
+own rclpy state or signal handlers.
 """
 
 from __future__ import annotations
 
 import importlib
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
-from growspace_sim.node.params import specs
+from growspace_sim.node.params import ParamSpec
 from growspace_sim.node.transport import (
     MessageCallback, PublishFn, ServiceHandler, ThrottledLogger, guarded)
 from growspace_sim.ros import qos as ros_qos, types
+
+READ_ONLY = frozenset({'mode', 'rate_hz', 'record_path', 'frame_id', 'image_frame_id'})
+SPIN_S = 0.1  # longest wait in ``spin`` before the stop condition is checked again [s]
+ROS_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})  # every node's
 
 
 def interface_class(typename: str) -> Any:
@@ -27,6 +35,7 @@ def interface_class(typename: str) -> Any:
 
 
 def to_rclpy_qos(profile: ros_qos.QosProfile) -> Any:
+    """The ``rclpy.qos.QoSProfile`` of one of our profiles."""
     from rclpy.duration import Duration
     from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
                            ReliabilityPolicy)
@@ -44,21 +53,60 @@ def to_rclpy_qos(profile: ros_qos.QosProfile) -> Any:
         avoid_ros_namespace_conventions=profile.avoid_ros_namespace_conventions, **kwargs)
 
 
+def make_executor(context: Any) -> Any:
+    """rclpy's C++ ``EventsExecutor`` (rclpy >= 7.1 on Jazzy), else the single-threaded one."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        from rclpy.executors import SingleThreadedExecutor as EventsExecutor
+    return EventsExecutor(context=context)
+
+
 class RclpyTransport:
-    """``Transport`` on an rclpy node (``rclpy.init`` must have run).
+    """``Transport`` on an rclpy node with its own executor.
 
     Args:
-        node_name: default node name (``--ros-args -r __node:=`` overrides it, as usual).
+        node_name: default node name (``-r __node:=`` in ``args`` overrides it, as usual).
+        namespace: default namespace (``-r __ns:=`` overrides it).
+        args: a ROS command line for this node (``--ros-args -p ... -r ...``); with it the
+            transport initialises the default context, as a ROS executable does, and rclpy's
+            SIGINT/SIGTERM handlers are installed. Without it the transport runs in a private
+            context and leaves signals alone (a library client: bridge, recorder, teleop).
+        domain_id: ROS domain of a private context; ROS_DOMAIN_ID when None.
+        automatic_overrides: declare every ``-p``/params-file value, so ``declare_parameters``
+            can tell which ones are unknown.
     """
 
-    def __init__(self, node_name: str, namespace: str | None = None) -> None:
+    def __init__(self, node_name: str, namespace: str | None = None,
+                 args: Sequence[str] | None = None, *, domain_id: int | None = None,
+                 automatic_overrides: bool = False) -> None:
+        import rclpy
+        from rclpy.context import Context
         from rclpy.node import Node
+        from rclpy.signals import SignalHandlerOptions
 
-        kwargs = {'namespace': namespace} if namespace else {}
-        self.node = Node(node_name, **kwargs)
+        if args is None:
+            self.context = Context()
+            rclpy.init(context=self.context, domain_id=domain_id,
+                       signal_handler_options=SignalHandlerOptions.NO)
+        else:
+            self.context = rclpy.get_default_context()
+            rclpy.init(args=list(args), context=self.context)
+        try:
+            kwargs = {'namespace': namespace} if namespace else {}
+            self.node = Node(node_name, context=self.context,
+                             automatically_declare_parameters_from_overrides=automatic_overrides,
+                             **kwargs)
+        except BaseException:
+            self.context.try_shutdown()
+            raise
+        self.executor = make_executor(self.context)
+        self.executor.add_node(self.node)
         log = self.node.get_logger()
         self.logger = ThrottledLogger(log.warning, log.info)
         self._publishers: dict[str, Any] = {}
+        self._subscriptions: dict[str, Any] = {}
+        self._closed = False
 
     def resolve(self, topic: str) -> str:
         return self.node.resolve_topic_name(topic)
@@ -66,31 +114,47 @@ class RclpyTransport:
     def publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> PublishFn:
         pub = self.node.create_publisher(interface_class(typename), topic, to_rclpy_qos(qos))
         self._publishers[self.resolve(topic)] = pub
+        serialize, write = types.serialize, pub.publish
 
         def publish(msg: Any) -> bytes:
-            cdr = types.serialize(msg, typename)
-            pub.publish(cdr)  # bytes are published as a serialized message
+            cdr = serialize(msg, typename)
+            write(cdr)  # bytes are published as a serialized message
             return cdr
         return publish
+
+    def raw_publisher(self, typename: str, topic: str,
+                      qos: ros_qos.QosProfile) -> Callable[[bytes], None]:
+        """A publisher of CDR bytes as they are (replay republishes recorded bytes)."""
+        pub = self.node.create_publisher(interface_class(typename), topic, to_rclpy_qos(qos))
+        self._publishers[self.resolve(topic)] = pub
+        return pub.publish
 
     def subscribe(self, typename: str, topic: str, qos: ros_qos.QosProfile,
                   callback: MessageCallback) -> None:
         where = self.resolve(topic)
         safe = guarded(self.logger, where, callback)
+        deserialize = types.deserialize
 
         def receive(cdr: bytes) -> None:
             try:
-                msg = types.deserialize(cdr, typename)
+                msg = deserialize(cdr, typename)
             except types.CdrError as e:
                 self.logger.warn(f'cdr:{where}', f'{where}: dropped a malformed message: {e}')
                 return
-            safe(msg, bytes(cdr))
-        self.node.create_subscription(interface_class(typename), topic, receive,
-                                      to_rclpy_qos(qos), raw=True)
+            safe(msg, cdr)
+        self._subscriptions[where] = self.node.create_subscription(
+            interface_class(typename), topic, receive, to_rclpy_qos(qos), raw=True)
 
     def has_subscribers(self, topic: str) -> bool:
         pub = self._publishers.get(self.resolve(topic))
         return pub is not None and pub.get_subscription_count() > 0
+
+    def matched(self, topic: str) -> bool:
+        endpoint = self._publishers.get(self.resolve(topic))
+        if endpoint is not None:
+            return endpoint.get_subscription_count() > 0
+        endpoint = self._subscriptions.get(self.resolve(topic))
+        return endpoint is not None and endpoint.get_publisher_count() > 0
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         from rclpy.serialization import deserialize_message, serialize_message
@@ -113,47 +177,105 @@ class RclpyTransport:
         self.node.create_timer(period_s, guarded(self.logger, 'timer', callback))
 
     def spin_once(self, timeout_s: float) -> None:
-        import rclpy
+        self.executor.spin_once(timeout_sec=timeout_s)
 
-        rclpy.spin_once(self.node, timeout_sec=timeout_s)
+    def spin(self, stop: Callable[[], bool] = lambda: False) -> None:
+        """Process callbacks until the context shuts down (SIGINT/SIGTERM with ``args``).
+
+        A loop of ``spin_once`` rather than ``executor.spin()``: the ``EventsExecutor``'s spin
+        does not return when a signal shuts the context down.
+
+        Args:
+            stop: checked every ``SPIN_S`` too; True ends the loop.
+        """
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            while self.context.ok() and not stop():
+                self.executor.spin_once(timeout_sec=SPIN_S)
+        except ExternalShutdownException:
+            pass
 
     def now_ns(self) -> int:
         return time.time_ns()
 
+    def flush(self, timeout_s: float = 1.0) -> None:
+        """Wait until reliable readers acknowledged what we published (before exiting)."""
+        from rclpy.duration import Duration
+
+        for pub in self._publishers.values():
+            pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9)))
+
     def close(self) -> None:
-        self.node.destroy_node()
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self.executor.shutdown(timeout_sec=1.0)
+            self.node.destroy_node()
+        finally:
+            self.context.try_shutdown()
 
     # --- parameters ----------------------------------------------------------------------
 
-    def declare_parameters(self) -> dict[str, Any]:
-        """Declare every node parameter with a descriptor; return the values (overrides in)."""
+    def declare_parameters(
+            self, specs: Sequence[ParamSpec], check: Callable[[ParamSpec, Any], Any],
+    ) -> tuple[dict[str, Any], list[str]]:
+        """Declare every node parameter with its description, taking values from the overrides.
+
+        Args:
+            specs: the parameters (``node.params.specs()``).
+            check: coerces a given value to its parameter's type or raises ``ParamError``
+                (so ``-p rate_hz:=20`` is 20.0, as the params file's ``20.0`` would be).
+
+        Returns:
+            The values (overrides applied) and the names of unknown overrides (typos), which
+            are left undeclared.
+
+        Raises:
+            ParamError: an override of the wrong type.
+        """
         from rcl_interfaces.msg import ParameterDescriptor
         from rclpy.parameter import Parameter
 
-        read_only = {'mode', 'rate_hz', 'record_path', 'frame_id', 'image_frame_id'}
+        node = self.node
+        given = {name: node.get_parameter(name).value
+                 for name in node.list_parameters([], 0).names if name not in ROS_PARAMETERS}
+        for name in given:
+            node.undeclare_parameter(name)
         values = {}
-        for spec in specs():
-            descriptor = ParameterDescriptor(
-                description=spec.description, read_only=spec.name in read_only)
-            if isinstance(spec.default, tuple):
-                # An empty default list would be typed as a bool array: give the type instead.
-                param = self.node.declare_parameter(
-                    spec.name, Parameter.Type.INTEGER_ARRAY, descriptor)
-                value = param.value
-                values[spec.name] = list(value) if value is not None else list(spec.default)
+        for spec in specs:
+            value = check(spec, given[spec.name]) if spec.name in given else spec.default
+            descriptor = ParameterDescriptor(description=spec.description,
+                                             read_only=spec.name in READ_ONLY)
+            if isinstance(value, tuple):  # the digits list: [] alone would carry no type
+                array = Parameter.Type.INTEGER_ARRAY
+                node.declare_parameter(spec.name, array, descriptor, ignore_override=True)
+                node.set_parameters([Parameter(spec.name, array, list(value))])
+                values[spec.name] = list(value)
             else:
-                values[spec.name] = self.node.declare_parameter(
-                    spec.name, spec.default, descriptor).value
-        return values
+                node.declare_parameter(spec.name, value, descriptor, ignore_override=True)
+                values[spec.name] = value
+        return values, sorted(set(given) - {s.name for s in specs})
 
     def on_parameter_change(self, propose: Callable[[dict[str, Any]], str | None]) -> None:
         """Reject invalid runtime changes: ``propose`` builds a candidate configuration."""
         from rcl_interfaces.msg import SetParametersResult
 
         def check(parameters: list[Any]) -> Any:
-            # Array parameters arrive as array.array or lists; SimConfig wants lists.
-            changes = {p.name: p.value if isinstance(p.value, (str, bytes)) or not hasattr(
-                p.value, '__len__') else list(p.value) for p in parameters}
+            # Array parameters arrive as array.array; SimConfig wants lists.
+            changes = {p.name: list(p.value) if p.type_.name.endswith('_ARRAY') else p.value
+                       for p in parameters}
             error = propose(changes)
             return SetParametersResult(successful=error is None, reason=error or '')
         self.node.add_on_set_parameters_callback(check)
+
+    def show_parameters(self, values: dict[str, Any]) -> None:
+        """Make parameters show values the node adopted by itself (a reset's challenge)."""
+        from rclpy.parameter import Parameter
+
+        current = {name: self.node.get_parameter(name).value for name in values}
+        changed = [Parameter(name, value=value) for name, value in values.items()
+                   if current[name] != value]
+        if changed:
+            self.node.set_parameters(changed)

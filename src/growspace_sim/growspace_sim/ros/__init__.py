@@ -1,6 +1,6 @@
-"""ROS 2 wire layer without rclpy: message types (rosbags) and a Cyclone DDS transport.
+"""ROS 2 data without rclpy: message types and CDR (rosbags), QoS profiles, name rules.
 
-Submodules: `types` (typestore, CDR, type hashes), `idl` (cyclonedds type classes), `names`
-(rcl name resolution), `qos` (rmw QoS profiles), `dds` (the transport). Only `idl` and `dds`
-import cyclonedds.
+Submodules: `types` (typestore, CDR, type hashes), `qos` (QoS profiles and their rosbag2 YAML),
+`names` (rcl name resolution for the in-process node) and `loopback` (the network rule: what we
+start stays on this host). None of them imports rclpy, so recording and replay run anywhere.
 """

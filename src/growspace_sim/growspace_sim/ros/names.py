@@ -1,16 +1,14 @@
-"""ROS 2 name rules as rcl applies them: validation, expansion and the DDS topic prefixes.
+"""ROS 2 name rules as rcl applies them, for what runs without rclpy (the in-process node).
 
-`resolve_topic('plant/state', 'sim', '/chamber1')` gives `/chamber1/plant/state`, `~/debug` gives
-`/chamber1/sim/debug`, and `dds_topic()` turns that into `rt/chamber1/plant/state`.
+`resolve_topic('plant/state', 'sim', '/chamber1')` gives `/chamber1/plant/state` and `~/debug`
+gives `/chamber1/sim/debug`, as ``rclpy.expand_topic_name`` does (tests/test_names_qos.py
+compares them). On ROS, rcl itself resolves names and applies remappings.
 """
 
 from __future__ import annotations
 
 import re
 
-TOPIC_PREFIX = 'rt'  # rmw prefix of topics; services use 'rq'/'rr' with suffixes Request/Reply
-REQUEST_PREFIX = 'rq'
-REPLY_PREFIX = 'rr'
 MAX_NODE_NAME_LENGTH = 255  # RMW_NODE_NAME_MAX_NAME_LENGTH
 
 _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
@@ -120,23 +118,3 @@ def resolve_topic(name: str, node_name: str, namespace: str = '/') -> str:
         expanded = expanded[1:]  # '{ns}/x' in the root namespace
     _check_tokens(expanded, 'Topic name')
     return expanded
-
-
-def dds_topic(fq_name: str, prefix: str = TOPIC_PREFIX, suffix: str = '') -> str:
-    """Return the DDS topic name of a fully qualified ROS name, e.g. `rt/chamber1/plant/state`.
-
-    Args:
-        fq_name: Fully qualified ROS name (from `resolve_topic`).
-        prefix: `rt` for topics, `rq`/`rr` for service requests and replies.
-        suffix: `Request`/`Reply` for services, empty for topics.
-
-    Returns:
-        The DDS topic name.
-
-    Raises:
-        InvalidNameError: `fq_name` is not fully qualified.
-    """
-    if not fq_name.startswith('/'):
-        raise InvalidNameError(f'{fq_name!r} is not a fully qualified name (resolve it first)')
-    _check_tokens(fq_name, 'Topic name')
-    return f'{prefix}{fq_name}{suffix}'

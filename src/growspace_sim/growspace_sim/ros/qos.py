@@ -1,17 +1,17 @@
-"""rmw QoS profiles and their Cyclone DDS form, mapped the way rmw_cyclonedds_cpp does it.
+"""ROS 2 QoS profiles as plain data: what the chamber offers, and what its recordings say.
 
-Jazzy `rmw_cyclonedds_cpp` (`create_readwrite_qos` in rmw_node.cpp) turns a ROS profile into
-DDS QoS as follows; `to_dds()` repeats it so a ROS node matches and shows our endpoints as its own:
-reliable writers block forever (`max_blocking_time` infinite), transient-local also sets the
-durability service history, autodispose is off, liveliness is automatic with an infinite lease
-unless set, deadline and lifespan are only set when given, the data representation is XCDR1 only
-and USER_DATA carries `typehash=RIHS01_...;`.
+The node's topic table (``node.interface``) is written with these profiles; the rclpy transport
+turns them into ``rclpy.qos.QoSProfile`` (``node.rclpy_transport.to_rclpy_qos``) and the recorder
+writes them into each MCAP channel as rosbag2's ``offered_qos_profiles`` YAML, so the in-process
+recorder, which has no rclpy, writes the same metadata as a live node.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from typing import Any, Sequence
+
+import yaml
 
 _HISTORIES = ('keep_last', 'keep_all')
 _RELIABILITIES = ('reliable', 'best_effort')
@@ -74,86 +74,17 @@ DEFAULT = QosProfile()
 SENSOR_DATA = QosProfile(depth=5, reliability='best_effort')
 # A latched topic: late joiners get the last sample (rclpy's transient-local idiom).
 LATCHED = QosProfile(depth=1, durability='transient_local')
-# rmw_qos_profile_services_default.
-SERVICES_DEFAULT = QosProfile()
-# /clock, per the interop design: reliable keeps best-effort subscribers compatible.
+# /clock: reliable, so best-effort subscribers match too.
 CLOCK = QosProfile(depth=1)
-# ros_discovery_info as rmw_cyclonedds creates it: raw DDS name, writer keeps the last snapshot.
-DISCOVERY_INFO_WRITER = QosProfile(depth=1, durability='transient_local',
-                                   avoid_ros_namespace_conventions=True)
-DISCOVERY_INFO_READER = QosProfile(history='keep_all', depth=1, durability='transient_local',
-                                   avoid_ros_namespace_conventions=True)
 
 
-def user_data(typehash: str | None, extra: str = '') -> bytes:
-    """Build endpoint USER_DATA as rmw does: `<extra>typehash=RIHS01_<hex>;`.
-
-    Args:
-        typehash: The RIHS01 hash, or None to leave it out (rmw then records a zero hash).
-        extra: Text put before the hash, e.g. `serviceid=...;` for service endpoints.
-
-    Returns:
-        The USER_DATA bytes.
-    """
-    return (extra + (f'typehash={typehash};' if typehash else '')).encode('ascii')
-
-
-def to_dds(profile: QosProfile, typehash: str | None = None, extra_user_data: str = ''):
-    """Map a profile to Cyclone DDS QoS the way rmw_cyclonedds_cpp does.
-
-    Args:
-        profile: The ROS profile.
-        typehash: RIHS01 hash of the endpoint's type, put in USER_DATA.
-        extra_user_data: Text put before the hash in USER_DATA.
-
-    Returns:
-        A `cyclonedds.qos.Qos`.
-    """
-    from cyclonedds.qos import Policy, Qos
-    from cyclonedds.util import duration
-
-    infinite = duration(infinite=True)
-    if profile.history == 'keep_all':
-        history = Policy.History.KeepAll
-    else:
-        history = Policy.History.KeepLast(profile.depth)
-    policies = [
-        history,
-        Policy.Reliability.Reliable(max_blocking_time=infinite)
-        if profile.reliability == 'reliable' else Policy.Reliability.BestEffort,
-        Policy.WriterDataLifecycle(autodispose=False),
-        # rmw_cyclonedds and rmw_fastrtps both speak XCDR1 only; a ROS reader rejects XCDR2.
-        Policy.DataRepresentation(use_cdrv0_representation=True),
-    ]
-    if profile.durability == 'transient_local':
-        policies += [
-            Policy.Durability.TransientLocal,
-            Policy.DurabilityService(cleanup_delay=0, history=history, max_samples=-1,
-                                     max_instances=-1, max_samples_per_instance=-1),
-        ]
-    else:
-        policies.append(Policy.Durability.Volatile)
-    if profile.deadline_ns:
-        policies.append(Policy.Deadline(deadline=profile.deadline_ns))
-    if profile.lifespan_ns:
-        policies.append(Policy.Lifespan(lifespan=profile.lifespan_ns))
-    lease = profile.liveliness_lease_duration_ns or infinite
-    policies.append(Policy.Liveliness.ManualByTopic(lease_duration=lease)
-                    if profile.liveliness == 'manual_by_topic'
-                    else Policy.Liveliness.Automatic(lease_duration=lease))
-    data = user_data(typehash, extra_user_data)
-    if data:
-        policies.append(Policy.Userdata(data=data))
-    return Qos(*policies)
-
-
-def _yaml_duration(key: str, ns: int) -> list[str]:
+def _duration(ns: int) -> dict[str, int]:
     sec, nsec = divmod(ns, 1_000_000_000) if ns else (_INFINITE_SEC, _INFINITE_NSEC)
-    return [f'  {key}:', f'    sec: {sec}', f'    nsec: {nsec}']
+    return {'sec': sec, 'nsec': nsec}
 
 
 def offered_qos_yaml(profiles: QosProfile | Sequence[QosProfile]) -> str:
-    """Write profiles as rosbag2 metadata v9 `offered_qos_profiles` (the MCAP channel metadata).
+    """Write profiles as rosbag2 metadata v9 ``offered_qos_profiles`` (the MCAP channel metadata).
 
     Unspecified durations are written as rmw's infinite duration, which is what rosbag2 records
     for a live publisher that left them unset.
@@ -166,17 +97,15 @@ def offered_qos_yaml(profiles: QosProfile | Sequence[QosProfile]) -> str:
     """
     if isinstance(profiles, QosProfile):
         profiles = [profiles]
-    lines = []
-    for p in profiles:
-        lines += [
-            f'- history: {p.history}',
-            f'  depth: {p.depth if p.history == "keep_last" else 0}',
-            f'  reliability: {p.reliability}',
-            f'  durability: {p.durability}',
-            *_yaml_duration('deadline', p.deadline_ns),
-            *_yaml_duration('lifespan', p.lifespan_ns),
-            f'  liveliness: {p.liveliness}',
-            *_yaml_duration('liveliness_lease_duration', p.liveliness_lease_duration_ns),
-            f'  avoid_ros_namespace_conventions: {str(p.avoid_ros_namespace_conventions).lower()}',
-        ]
-    return '\n'.join(lines) if lines else '[]'
+    entries: list[dict[str, Any]] = [{
+        'history': p.history,
+        'depth': p.depth if p.history == 'keep_last' else 0,
+        'reliability': p.reliability,
+        'durability': p.durability,
+        'deadline': _duration(p.deadline_ns),
+        'lifespan': _duration(p.lifespan_ns),
+        'liveliness': p.liveliness,
+        'liveliness_lease_duration': _duration(p.liveliness_lease_duration_ns),
+        'avoid_ros_namespace_conventions': p.avoid_ros_namespace_conventions,
+    } for p in profiles]
+    return yaml.safe_dump(entries, sort_keys=False, default_flow_style=False).rstrip('\n')

@@ -2,7 +2,9 @@
 
 The `.msg`/`.srv` files of `growspace_msgs` are the single source of truth. This module parses
 them (plus the standard Jazzy definitions shipped with rosbags) and offers CDR (de)serialisation,
-the MCAP schema text, the REP-2011 type hash and the DDS type name of every type.
+the MCAP schema text and the REP-2011 type hash of every type. It is the codec of the whole
+project: the rclpy transport publishes and takes these CDR bytes as serialized messages, and
+recording and replay work with them on machines without a ROS build.
 
 Type names are the ROS 2 long form, e.g. `growspace_msgs/msg/LightCommand`,
 `sensor_msgs/msg/Image`, `growspace_msgs/srv/Reset_Request`.
@@ -381,22 +383,3 @@ def type_hash(typename: str) -> str:
         for name, (consts, fields) in typestore().fielddefs.items()
     }
     return shadow.hash_rihs01(typename)
-
-
-def dds_type_name(typename: str) -> str:
-    """Return the DDS type name rmw uses for a ROS type.
-
-    Args:
-        typename: e.g. `growspace_msgs/msg/StepResult` or `growspace_msgs/srv/Reset_Request`.
-
-    Returns:
-        e.g. `growspace_msgs::msg::dds_::StepResult_`.
-
-    Raises:
-        ValueError: The name is not of the form `pkg/msg/Name` or `pkg/srv/Name`.
-    """
-    parts = typename.split('/')
-    if len(parts) != 3 or not all(parts):
-        raise ValueError(f'Type name {typename!r} is not of the form pkg/msg/Name')
-    pkg, kind, name = parts
-    return f'{pkg}::{kind}::dds_::{name}_'

@@ -1,0 +1,54 @@
+"""The network rule: ROS processes we start talk only on this host unless the user chose otherwise.
+
+Two settings together, each applied only where the user set nothing (measured in
+shared/design/ros2-pypi.md: either one alone already sent no packet to a LAN interface):
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (rcl, Jazzy) and a Fast DDS profile
+(``FASTRTPS_DEFAULT_PROFILES_FILE``) whose only transports are UDP on 127.0.0.1 and shared memory.
+Both are read when the first ROS context of a process starts, so call ``confine`` before
+``rclpy.init`` and pass ``confined_env`` to child processes.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import MutableMapping
+
+RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
+PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+PROFILE_NAME = 'fastdds_loopback.xml'
+
+
+def profile_path() -> Path:
+    """The shipped Fast DDS loopback profile (installed share/, else the source tree)."""
+    try:
+        from ament_index_python.packages import (
+            get_package_share_directory, PackageNotFoundError)
+        try:
+            return Path(get_package_share_directory('growspace_sim')) / 'config' / PROFILE_NAME
+        except PackageNotFoundError:
+            pass
+    except ImportError:
+        pass
+    return Path(__file__).resolve().parents[2] / 'config' / PROFILE_NAME
+
+
+def confine(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
+    """Set the loopback defaults in ``env`` (``os.environ`` by default) where they are unset.
+
+    Returns:
+        ``env``, for chaining into a child process's environment.
+    """
+    env = os.environ if env is None else env
+    if not env.get(RANGE_VAR):
+        env[RANGE_VAR] = 'LOCALHOST'
+    if not env.get(PROFILE_VAR) and not env.get('FASTDDS_DEFAULT_PROFILES_FILE'):
+        env[PROFILE_VAR] = str(profile_path())
+    return env
+
+
+def confined_env() -> dict[str, str]:
+    """A copy of this process's environment with the loopback defaults, for a child process."""
+    env = dict(os.environ)
+    confine(env)
+    return env
