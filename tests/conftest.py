@@ -1,22 +1,26 @@
-"""Make the packages importable from a source checkout (./run.sh installs them as well)."""
+"""Test session set-up: ROS 2 stays on this host, in a domain of its own.
+
+The packages are installed by the colcon build that ``./run.sh`` sources, so nothing is added to
+``sys.path`` here. ``./run.sh test`` already runs the session in a loopback-only network
+namespace where the OS allows one; the loopback defaults and a random ROS domain keep a session
+started any other way off the network and apart from other sessions on the same host.
+"""
 
 import os
-import sys
+import random
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-for package in ('growspace_sim', 'growspace_gym_bridge'):
-    path = os.path.join(ROOT, 'src', package)
-    if path not in sys.path:
-        sys.path.insert(0, path)
+from growspace_sim.ros import loopback
+
+loopback.confine()
+if 'GROWSPACE_TEST_DOMAIN' in os.environ:
+    os.environ['ROS_DOMAIN_ID'] = os.environ['GROWSPACE_TEST_DOMAIN']
+else:  # 1..101: domain ids whose ports fit with Fast DDS's defaults
+    os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 101))
 
 
 def child_env() -> dict:
-    """Environment for a child Python process that must import the packages like we do."""
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(
-        [os.path.join(ROOT, 'src', p) for p in ('growspace_sim', 'growspace_gym_bridge')]
-        + [os.path.join(ROOT, 'tests')] + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
-    return env
+    """Environment for a child Python process: ours (workspace sourced, loopback, domain)."""
+    return dict(os.environ)
 
 
 def pytest_configure(config):

@@ -294,13 +294,21 @@ def _cdr_functions(typename: str) -> tuple[Any, Any]:
     return msgdef.getsize_cdr, msgdef.serialize_cdr_le
 
 
+@functools.lru_cache(maxsize=None)
+def _cdr_readers(typename: str) -> tuple[Any, Any, type]:
+    msgdef = typestore().get_msgdef(typename)
+    return msgdef.deserialize_cdr_le, msgdef.deserialize_cdr_be, msgdef.cls
+
+
 def deserialize(data: bytes | memoryview, typename: str) -> Any:
     """Decode CDR bytes (encapsulation header included) into a message.
 
     Data from the network is untrusted, so every failure comes out as one exception type.
 
     Args:
-        data: The CDR payload, possibly padded to 4 bytes.
+        data: The CDR payload, possibly followed by up to 7 pad bytes: rmw_fastrtps (Fast CDR)
+            pads some messages to 8 bytes, beyond the 3 that ``Typestore.deserialize_cdr``
+            accepts (tests/test_msgs_wire.py).
         typename: The expected message type name.
 
     Returns:
@@ -312,9 +320,14 @@ def deserialize(data: bytes | memoryview, typename: str) -> Any:
     if len(data) < 4 or bytes(data[:2]) not in (b'\x00\x00', b'\x00\x01'):
         raise CdrError(f'Not an XCDR1 payload for {typename}: header {bytes(data[:4]).hex()!r}')
     try:
-        return typestore().deserialize_cdr(data, typename)
+        read_le, read_be, cls = _cdr_readers(typename)
+        msg, end = (read_le if data[1] else read_be)(memoryview(data)[4:], 0, cls, typestore())
     except Exception as exc:  # noqa: BLE001 - any decoder failure means malformed input
         raise CdrError(f'Malformed CDR for {typename} ({len(data)} B): {exc}') from exc
+    if not 0 <= len(data) - 4 - end <= 7:
+        raise CdrError(f'Malformed CDR for {typename} ({len(data)} B): {len(data) - 4 - end} '
+                       f'bytes after the message; at most 7 pad bytes are allowed.')
+    return msg
 
 
 def to_plain(msg: Any) -> Any:

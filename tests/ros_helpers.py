@@ -1,0 +1,122 @@
+"""Real ROS 2 pieces for tests: the installed ``sim_node`` executable and an rclpy client.
+
+The client uses the rosidl-generated ``growspace_msgs`` and ``sensor_msgs`` classes, as any ROS
+user's node would, so these tests check our node against rclpy itself, not against our codec.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import time
+from typing import Any, Callable
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from growspace_msgs.msg import LightCommand, ResetRequest, StepResult
+from sensor_msgs.msg import Image
+
+TIMEOUT_S = 20.0
+COMMANDS = QoSProfile(depth=100)
+OBSERVATIONS = QoSProfile(depth=10)
+
+
+def sim_node_executable() -> str:
+    """What ``ros2 run growspace_sim sim_node`` starts: the colcon-installed executable."""
+    prefix = os.environ.get('COLCON_PREFIX_PATH', '').split(os.pathsep)[0] or 'install'
+    exe = Path(prefix) / 'growspace_sim' / 'lib' / 'growspace_sim' / 'sim_node'
+    return str(exe) if exe.exists() else (shutil.which('sim_node') or str(exe))
+
+
+class NodeProcess:
+    """``sim_node`` as a child process (its stdout and stderr kept); always killed at the end."""
+
+    def __init__(self, *ros_args: str, namespace: str | None = '/gs_test') -> None:
+        remap = ['-r', f'__ns:={namespace}'] if namespace else []
+        self.argv = [sim_node_executable(), '--ros-args', *remap, *ros_args]
+        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True)
+
+    def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
+        """Send ``sig``, wait; returns the exit status and everything the node logged."""
+        try:
+            if self.proc.poll() is None:
+                self.proc.send_signal(sig)
+            out, err = self.proc.communicate(timeout=TIMEOUT_S)
+            return self.proc.returncode, out + err
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+
+
+class Client:
+    """A lockstep client on rclpy with the generated message classes, in a private context."""
+
+    def __init__(self, namespace: str = '/gs_test', name: str = 'test_client') -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node(name, namespace=namespace, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.command = self.node.create_publisher(LightCommand, 'light/command', COMMANDS)
+        self.reset_pub = self.node.create_publisher(ResetRequest, 'reset', COMMANDS)
+        self.results: list[StepResult] = []
+        self.images: list[Image] = []
+        self.node.create_subscription(StepResult, 'step_result', self.results.append,
+                                      OBSERVATIONS)
+        self.node.create_subscription(Image, 'camera/image_raw', self.images.append,
+                                      OBSERVATIONS)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float = TIMEOUT_S) -> bool:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def connect(self) -> None:
+        assert self.spin_until(lambda: self.command.get_subscription_count() > 0
+                               and self.reset_pub.get_subscription_count() > 0
+                               and self.node.count_publishers(
+                                   self.node.resolve_topic_name('step_result')) > 0), \
+            'the node did not appear'
+        self.drain(0.3)  # let the node match our subscriptions too
+
+    def wait_result(self, match: Callable[[StepResult], bool],
+                    timeout: float = TIMEOUT_S) -> StepResult:
+        found: list[StepResult] = []
+
+        def seen() -> bool:
+            found.extend(r for r in self.results if match(r) and r not in found)
+            return bool(found)
+        assert self.spin_until(seen, timeout), 'no matching StepResult in time'
+        return found[0]
+
+    def reset(self, reset_id: int, **fields: Any) -> StepResult:
+        self.reset_pub.publish(ResetRequest(reset_id=reset_id, **fields))
+        return self.wait_result(lambda m: m.reset_id == reset_id and m.step_id == 0)
+
+    def step(self, step_id: int, action: int) -> StepResult:
+        self.command.publish(LightCommand(step_id=step_id, mode=LightCommand.MODE_DISCRETE,
+                                          action=action))
+        return self.wait_result(lambda m: m.step_id == step_id)
+
+    def drain(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
