@@ -1,34 +1,16 @@
-"""Shared pieces of the bridge tests: a loopback DDS domain and exact comparisons."""
+"""Shared pieces of the bridge tests: the session's ROS domain and exact comparisons."""
 
 from __future__ import annotations
 
 import os
-from pathlib import Path
-import random
 from typing import Any, Iterator
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-CONFIG = ROOT / 'config' / 'cyclonedds.xml'
-KEYS = ('CYCLONEDDS_URI', 'ROS_DOMAIN_ID', 'GROWSPACE_TRANSPORT')
-
 
 def loopback_domain() -> Iterator[int]:
-    """Loopback-only Cyclone config and a random domain in 100-200, for us and our nodes."""
-    saved = {k: os.environ.get(k) for k in KEYS}
-    domain = random.SystemRandom().randint(100, 200)
-    os.environ['CYCLONEDDS_URI'] = CONFIG.as_uri()
-    os.environ['ROS_DOMAIN_ID'] = str(domain)
-    os.environ['GROWSPACE_TRANSPORT'] = 'dds'
-    try:
-        yield domain
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+    """The session's ROS domain (conftest: loopback only, random id), for fixtures."""
+    yield int(os.environ['ROS_DOMAIN_ID'])
 
 
 def assert_identical(a: Any, b: Any, where: str = 'value') -> None:

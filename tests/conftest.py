@@ -19,8 +19,13 @@ else:  # 1..101: domain ids whose ports fit with Fast DDS's defaults
 
 
 def child_env() -> dict:
-    """Environment for a child Python process: ours (workspace sourced, loopback, domain)."""
-    return dict(os.environ)
+    """Environment for a child Python process: ours (workspace sourced, loopback, domain), and
+    the tests directory importable, as it is here."""
+    env = dict(os.environ)
+    tests = os.path.dirname(os.path.abspath(__file__))
+    env['PYTHONPATH'] = os.pathsep.join([tests] + ([env['PYTHONPATH']] if env.get('PYTHONPATH')
+                                                   else []))
+    return env
 
 
 def pytest_configure(config):

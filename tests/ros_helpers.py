@@ -92,24 +92,25 @@ class Client:
             'the node did not appear'
         self.drain(0.3)  # let the node match our subscriptions too
 
-    def wait_result(self, match: Callable[[StepResult], bool],
+    def wait_result(self, match: Callable[[StepResult], bool], since: int = 0,
                     timeout: float = TIMEOUT_S) -> StepResult:
-        found: list[StepResult] = []
-
-        def seen() -> bool:
-            found.extend(r for r in self.results if match(r) and r not in found)
-            return bool(found)
-        assert self.spin_until(seen, timeout), 'no matching StepResult in time'
-        return found[0]
+        """The first StepResult from ``self.results[since:]`` that ``match`` accepts."""
+        def found() -> StepResult | None:
+            return next((r for r in self.results[since:] if match(r)), None)
+        assert self.spin_until(lambda: found() is not None, timeout), \
+            'no matching StepResult in time'
+        return found()
 
     def reset(self, reset_id: int, **fields: Any) -> StepResult:
+        since = len(self.results)
         self.reset_pub.publish(ResetRequest(reset_id=reset_id, **fields))
-        return self.wait_result(lambda m: m.reset_id == reset_id and m.step_id == 0)
+        return self.wait_result(lambda m: m.reset_id == reset_id and m.step_id == 0, since)
 
     def step(self, step_id: int, action: int) -> StepResult:
+        since = len(self.results)
         self.command.publish(LightCommand(step_id=step_id, mode=LightCommand.MODE_DISCRETE,
                                           action=action))
-        return self.wait_result(lambda m: m.step_id == step_id)
+        return self.wait_result(lambda m: m.step_id == step_id, since)
 
     def drain(self, seconds: float) -> None:
         end = time.monotonic() + seconds

@@ -375,7 +375,6 @@ def test_core_imports_without_ros_or_opencv():
     code = ('import sys\n'
             'sys.modules["rclpy"] = None\n'
             'sys.modules["cv2"] = None\n'
-            'sys.modules["cyclonedds"] = None\n'
             'import growspace_sim.core as core\n'
             'import numpy as np\n'
             'c = core.Chamber(core.SimConfig())\n'

@@ -125,7 +125,6 @@ def test_eval_table_on_a_tiny_budget_has_the_expected_columns(tmp_path):
 
 
 def test_training_through_the_ros_bridge(tmp_path):
-    pytest.importorskip('cyclonedds')
     pytest.importorskip('growspace_gym_bridge')
     run = train.train('ppo', ENV, 100, seed=0, out=tmp_path / 'bridge', n_envs=1,
                       device='cpu', hp={'n_steps': 50, 'batch_size': 25, 'n_epochs': 1},

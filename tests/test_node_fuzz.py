@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import random
-import time
 
 import numpy as np
 
@@ -14,8 +13,12 @@ from growspace_sim.envs import GrowSpaceEnv
 from growspace_sim.node.chamber_node import ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
-from growspace_sim.ros import dds, types
-from test_node_dds import NAMESPACE, Client, NodeProcess, loopback_env  # noqa: F401
+from growspace_sim.node.interface import COMMAND_QOS
+from growspace_sim.node.rclpy_transport import RclpyTransport
+from growspace_sim.ros import types
+from ros_helpers import Client, NodeProcess
+
+NAMESPACE = '/gs_fuzz'
 
 FLOATS = [0.0, -0.0, 0.3, -1.0, 1.0, 1e308, -1e308, math.nan, math.inf, -math.inf, 5e-324, 84.0]
 INTS = [0, 1, 2, 4, 5, 6, 7, -1, 2**31 - 1, -2**31]
@@ -97,45 +100,41 @@ def test_ten_thousand_random_and_malformed_commands_in_process() -> None:
     assert_steps_like_the_env(transport)
 
 
-def test_fuzz_over_dds_with_raw_garbage_then_lockstep_still_works() -> None:
+def test_fuzz_over_ros_with_raw_garbage_then_lockstep_still_works() -> None:
     rng = random.Random(7)
-    node = NodeProcess('-p', 'seed:=3')
+    node = NodeProcess('-p', 'seed:=3', namespace=NAMESPACE)
+    client = Client(NAMESPACE)
+    fuzzer = RclpyTransport('fuzzer', NAMESPACE)
     try:
-        with dds.DdsContext('fuzzer', NAMESPACE) as ctx:
-            client = Client(ctx)
-            client.connect()
-            sent = refused = i = 0
-            while sent < 1_200 and i < 6_000:
-                i += 1
-                pub = client.command if rng.random() < 0.9 else client.reset_pub
-                try:
-                    if rng.random() < 0.5:
-                        pub.publish_raw(garbage(rng))
-                    elif pub is client.command:
-                        pub.publish(random_command(rng))
-                    else:
-                        pub.publish(types.new(types.RESET_REQUEST, reset_id=10**6 + i,
-                                              challenge=rng.choice(['', 'x', 'shape'])))
-                    sent += 1
-                except dds.DdsError:
-                    refused += 1  # Cyclone checks the layout at write time
-            assert sent >= 1_200 and refused > 0, (sent, refused)
-            client.command.wait_for_acks(10.0)
-            client.reset_pub.wait_for_acks(10.0)
-            deadline = time.monotonic() + 15.0
-            while client.drain(0.5) and time.monotonic() < deadline:
-                pass  # until the node has answered the whole flood
-            assert node.proc.poll() is None, 'the node died'
-            first = client.reset(4242, has_seed=True, seed=8, challenge='control',
-                                 setting='easy')
-            assert first.step == 0 and first.info == ''
-            env = GrowSpaceEnv()
-            env.reset(seed=8)
-            for step_id in range(1, 6):
-                result = client.step(step_id, 1)
-                _, reward, *_ = env.step(1)
-                assert (result.step, result.reward, result.info) == (step_id, reward, '')
+        client.connect()
+        raw = {topic: fuzzer.raw_publisher(typename, topic, COMMAND_QOS)
+               for topic, typename in (('light/command', types.LIGHT_COMMAND),
+                                       ('reset', types.RESET_REQUEST))}
+        assert client.spin_until(lambda: all(map(fuzzer.matched, raw)))
+        for i in range(1_200):
+            topic = 'light/command' if rng.random() < 0.9 else 'reset'
+            if rng.random() < 0.5:
+                raw[topic](garbage(rng))
+            elif topic == 'light/command':
+                raw[topic](types.serialize(random_command(rng), types.LIGHT_COMMAND))
+            else:
+                raw[topic](types.serialize(types.new(
+                    types.RESET_REQUEST, reset_id=10**6 + i,
+                    challenge=rng.choice(['', 'x', 'shape'])), types.RESET_REQUEST))
+        fuzzer.flush(10.0)
+        client.drain(2.0)  # the node answers the whole flood
+        assert node.proc.poll() is None, 'the node died'
+        first = client.reset(4242, has_seed=True, seed=8, challenge='control', setting='easy')
+        assert first.step == 0 and first.info == ''
+        env = GrowSpaceEnv()
+        env.reset(seed=8)
+        for step_id in range(1, 6):
+            result = client.step(step_id, 1)
+            _, reward, *_ = env.step(1)
+            assert (result.step, result.reward, result.info) == (step_id, reward, '')
     finally:
+        fuzzer.close()
+        client.close()
         code, err = node.stop()
     assert code == 0, err
     assert 'Traceback' not in err

@@ -1,8 +1,7 @@
-"""sim_node recording end to end: a DDS client drives the node, SIGTERM, then replay re-simulates.
+"""sim_node recording end to end: an rclpy client drives the node, SIGTERM, then replay.
 
-The node runs as a subprocess with ``record_path`` on loopback Cyclone DDS (random domain
-100-200, see ``test_node_dds.loopback_env``); the recording it leaves must re-simulate bit for bit
-and hold exactly what the client saw.
+The node runs as the installed ``sim_node`` executable with ``record_path``; the recording it
+leaves must re-simulate bit for bit and hold exactly what the client saw.
 """
 
 from __future__ import annotations
@@ -12,8 +11,9 @@ import subprocess
 
 from growspace_sim import replay
 from growspace_sim.node.interface import TOPICS
-from growspace_sim.ros import dds
-from test_node_dds import NAMESPACE, Client, NodeProcess, loopback_env  # noqa: F401
+from ros_helpers import Client, NodeProcess
+
+NAMESPACE = '/gs_recording'
 
 EPISODE = 8  # steps per episode: short, the test is about wiring
 
@@ -22,24 +22,26 @@ def test_recording_of_a_lockstep_session_resimulates_and_matches_the_client(
         tmp_path: Path) -> None:
     path = tmp_path / 'node.mcap'
     node = NodeProcess('-p', 'seed:=4', '-p', f'episode_length:={EPISODE}', '-p',
-                       f'record_path:={path}')
+                       f'record_path:={path}', namespace=NAMESPACE)
     answered = []  # (reset_id, step_id, step, reward, info) of every answer the client waited for
     try:
-        with dds.DdsContext('client', NAMESPACE) as ctx:
-            client = Client(ctx)
-            client.connect()
-            first = client.reset(1, has_seed=True, seed=21)
-            answered.append(first)
-            step_id = 0
-            while step_id < EPISODE + 1:  # one of the commands is rejected without a step
-                step_id += 1
-                action = 9 if step_id == 3 else step_id % 5  # 9: no such action
-                answered.append(client.step(step_id, action))
-            # Unseeded, so the random stream continues across the challenge switch.
-            answered.append(client.reset(2, challenge='shape'))
-            for step_id in range(1, EPISODE + 1):
-                answered.append(client.step(step_id, step_id % 7))
-            late = client.drain(0.3)
+        client = Client(NAMESPACE)
+        client.connect()
+        first = client.reset(1, has_seed=True, seed=21)
+        answered.append(first)
+        step_id = 0
+        while step_id < EPISODE + 1:  # one of the commands is rejected without a step
+            step_id += 1
+            action = 9 if step_id == 3 else step_id % 5  # 9: no such action
+            answered.append(client.step(step_id, action))
+        # Unseeded, so the random stream continues across the challenge switch.
+        answered.append(client.reset(2, challenge='shape'))
+        for step_id in range(1, EPISODE + 1):
+            answered.append(client.step(step_id, step_id % 7))
+        before = len(client.results)
+        client.drain(0.3)
+        late = client.results[before:]
+        client.close()
     finally:
         try:
             code, err = node.stop()  # SIGTERM: the node finishes the file, exits 0
@@ -66,7 +68,7 @@ def test_recording_of_a_lockstep_session_resimulates_and_matches_the_client(
         results = [key(m.decode()) for m in bag.messages([f'{NAMESPACE}/step_result'])]
         assert {t.topic for t in bag.topics.values()} == {
             t.name if t.name.startswith('/') else f'{NAMESPACE}/{t.name}' for t in TOPICS}
-    seen = [key(m) for m in client.seen]
+    seen = [key(m) for m in client.results]
     assert info['messages'][f'{NAMESPACE}/step_result'] == len(results) == 1 + len(answered)
     assert results[1:] == [key(m) for m in answered]
     assert seen in (results, results[1:])

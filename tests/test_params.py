@@ -23,7 +23,7 @@ def test_yaml_keys_types_and_defaults_equal_the_dataclasses() -> None:
     fields = [*dataclasses.fields(SimConfig), *dataclasses.fields(NodeParams)]
     # An empty list is written commented out (ROS cannot type it); unset means the same.
     unset = [f.name for f in fields if f.default == ()]
-    assert unset == ['digits'] and f'    # digits: []' in YAML.read_text()
+    assert unset == ['digits'] and '    # digits: []' in YAML.read_text()
     assert list(values) == [f.name for f in fields if f.name not in unset]
     for field in fields:
         if field.name in unset:
@@ -56,52 +56,32 @@ def test_descriptions_name_units() -> None:
     assert all(described.values())
 
 
-def test_cli_parsing_files_then_overrides(tmp_path: Path) -> None:
-    extra = tmp_path / 'extra.yaml'
-    extra.write_text('/**:\n  ros__parameters:\n    rate_hz: 5.0\n    seed: 3\n'
-                     'other_node:\n  ros__parameters:\n    seed: 99\n'
-                     '/ns1/chamber:\n  ros__parameters:\n    challenge: shape\n')
-    args = params.parse_ros_args([
-        'ignored', '--ros-args', '--params-file', str(YAML), '--params-file', str(extra),
-        '-p', 'seed:=11', '-p', 'digits:=[3, 6]', '-p', 'shading:=false', '-r', '__ns:=/ns1',
-        '-r', '__node:=chamber', '--log-level', 'debug', '-p', 'frame_id:=lab'])
-    assert args.rest == ['ignored'] and args.namespace == '/ns1' and args.node_name == 'chamber'
-    cfg, node = params.build(args.params)
-    assert (node.rate_hz, node.seed, node.frame_id) == (5.0, 11, 'lab')
-    assert cfg.digits == (3, 6) and cfg.shading is False and cfg.challenge == 'shape'
-
-
-@pytest.mark.parametrize(('argv', 'words'), [
-    (['--ros-args', '-p', 'light_width:=2.0'], ['light_width', '2.0', '1.0']),
-    (['--ros-args', '-p', 'mode:=fast'], ['mode', 'fast', 'lockstep']),
-    (['--ros-args', '-p', 'rate_hz:=0'], ['rate_hz', '0']),
-    (['--ros-args', '-p', 'rate_hz:=abc'], ['rate_hz', 'abc', 'number']),
-    (['--ros-args', '-p', 'episode_length:=1.5'], ['episode_length', '1.5', 'integer']),
-    (['--ros-args', '-p', 'shading:=7'], ['shading', '7', 'bool']),
-    (['--ros-args', '-p', 'digits:=[12]'], ['digits', '12']),
-    (['--ros-args', '-p', 'seed:=-5'], ['seed', '-5']),
-    (['--ros-args', '-p', 'no_such:=1'], ['no_such']),
-    (['--ros-args', '-p', 'challenge:=tennis'], ['challenge', 'tennis', 'control']),
+@pytest.mark.parametrize(('values', 'words'), [
+    ({'light_width': 2.0}, ['light_width', '2.0', '1.0']),
+    ({'mode': 'fast'}, ['mode', 'fast', 'lockstep']),
+    ({'rate_hz': 0}, ['rate_hz', '0']),
+    ({'rate_hz': 'abc'}, ['rate_hz', 'abc', 'number']),
+    ({'episode_length': 1.5}, ['episode_length', '1.5', 'integer']),
+    ({'shading': 7}, ['shading', '7', 'bool']),
+    ({'digits': [12]}, ['digits', '12']),
+    ({'seed': -5}, ['seed', '-5']),
+    ({'no_such': 1}, ['no_such']),
+    ({'challenge': 'tennis'}, ['challenge', 'tennis', 'control']),
 ])
-def test_invalid_value_gives_one_clear_line(argv: list[str], words: list[str]) -> None:
+def test_invalid_value_gives_one_clear_line(values: dict, words: list[str]) -> None:
     with pytest.raises(ParamError) as err:
-        params.build(params.parse_ros_args(argv).params)
+        params.build(values)
     text = str(err.value)
     assert '\n' not in text
     for word in words:
         assert word in text, (word, text)
 
 
-@pytest.mark.parametrize('argv', [
-    ['--ros-args', '-r', 'light/command:=/x'],
-    ['--ros-args', '--enclave', '/e'],
-    ['--ros-args', '-p', 'seed'],
-    ['--ros-args', '-p'],
-    ['--ros-args', '--params-file', '/no/such/file.yaml'],
-])
-def test_unsupported_or_broken_arguments_are_errors(argv: list[str]) -> None:
-    with pytest.raises(ParamError):
-        params.parse_ros_args(argv)
+def test_an_integer_is_accepted_for_a_float_parameter() -> None:
+    spec = next(s for s in params.specs() if s.name == 'rate_hz')
+    assert params.check_type(spec, 20) == 20.0 and isinstance(params.check_type(spec, 20), float)
+    with pytest.raises(ParamError, match='rate_hz'):
+        params.check_type(spec, True)
 
 
 def test_as_values_inverts_build() -> None:

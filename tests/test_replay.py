@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-import random
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -203,27 +203,33 @@ def test_bad_bag_paths_are_clear_errors(tmp_path):
         recording.recover(tmp_path / 'missing.mcap', tmp_path / 'out.mcap')
 
 
-def test_play_republishes_every_message_over_loopback_dds(tmp_path, monkeypatch):
-    from growspace_sim.ros import dds
+def test_play_republishes_every_message_over_ros(tmp_path):
+    from growspace_sim.node.rclpy_transport import RclpyTransport
 
-    domain = random.randint(100, 200)
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
-    dds.ensure_loopback_config()
     path = tmp_path / 'p.mcap'
     record(path, seeds=(3,))
     with Bag(path) as bag:
         recorded = [m.data for m in bag.messages(['/growspace/step_result'])]
     received: list[bytes] = []
-    with dds.DdsContext('listener', '/', domain) as ctx:
-        sub = ctx.create_subscription(types.STEP_RESULT, '/growspace/step_result',
-                                      ros_qos.QosProfile(history='keep_all'))
-        n = replay.play(path, rate=None, domain_id=domain, wait_for_subscribers_s=5.0)
-        deadline = time.monotonic() + 10
-        while len(received) < len(recorded) and time.monotonic() < deadline:
-            sub.wait(0.1)
-            received += [data for data, _ in sub.take(256)]
-    assert n == sum(1 for _ in Bag(path).messages())
-    assert [bytes(r[:len(e)]) for r, e in zip(received, recorded)] == recorded
+    listener = RclpyTransport('listener')
+    try:
+        listener.subscribe(types.STEP_RESULT, '/growspace/step_result',
+                           ros_qos.QosProfile(history='keep_all'),
+                           lambda msg, cdr: received.append(bytes(cdr)))
+        thread = threading.Thread(target=lambda: played.append(replay.play(
+            path, rate=None, wait_for_subscribers_s=10.0)))
+        played: list[int] = []
+        thread.start()
+        deadline = time.monotonic() + 20
+        while (len(received) < len(recorded) or thread.is_alive()) \
+                and time.monotonic() < deadline:
+            listener.spin_once(0.05)
+        thread.join(5.0)
+    finally:
+        listener.close()
+    assert played == [sum(1 for _ in Bag(path).messages())]
+    assert [r[:len(e)] for r, e in zip(received, recorded)] == recorded
+    assert len(received) == len(recorded)
 
 
 def test_sample_bags_are_small_and_reproducible():

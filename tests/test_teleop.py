@@ -19,9 +19,9 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.node.chamber_node import ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
-from growspace_sim.ros import dds, types
+from growspace_sim.ros import types
 from growspace_sim.teleop import QUIT, RESET, Teleop, key_to_command
-from test_node_dds import NodeProcess, loopback_env  # noqa: F401
+from ros_helpers import Client, NodeProcess
 
 
 @pytest.mark.parametrize(('key', 'spot', 'name'), [
@@ -104,31 +104,32 @@ def test_teleop_in_a_terminal_drives_the_node() -> None:
         os.execv(sys.executable, [sys.executable, '-m', 'growspace_sim.teleop', '--ros-args',
                                   '-r', f'__ns:={namespace}'])
     try:
-        with dds.DdsContext('observer', namespace) as ctx:
-            results = ctx.create_subscription(types.STEP_RESULT, 'step_result')
-            assert results.wait_for_publishers(1, 20.0)
+        observer = Client(namespace, 'observer')
+        try:
+            observer.connect()
             screen = _read_until(fd, b'GrowSpace teleop', 20.0)
             assert b'GrowSpace teleop' in screen, screen
             time.sleep(1.0)  # let teleop's endpoints match the node's
-            step_ids = []
             for expected in (1, 2):
                 # Right arrow as xterm sends it in keypad (application) mode, which curses sets.
                 os.write(fd, b'\x1bOC')
                 deadline = time.monotonic() + 10.0
-                while time.monotonic() < deadline and len(step_ids) < expected:
-                    results.wait(0.2)
-                    step_ids += [m.step_id for _, m in results.take() if m.step_id]
+                while time.monotonic() < deadline and len(
+                        [m for m in observer.results if m.step_id]) < expected:
+                    observer.drain(0.1)
                     _read_until(fd, b'\0', 0.01)  # keep the pty drained
-            assert step_ids == [1, 2]
-            os.write(fd, b'q')
-            deadline = time.monotonic() + 10.0
-            while time.monotonic() < deadline:
-                done, status = os.waitpid(pid, os.WNOHANG)
-                if done:
-                    break
-                _read_until(fd, b'\0', 0.1)
-            assert done and os.waitstatus_to_exitcode(status) == 0
-            pid = 0
+            assert [m.step_id for m in observer.results if m.step_id] == [1, 2]
+        finally:
+            observer.close()
+        os.write(fd, b'q')
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                break
+            _read_until(fd, b'\0', 0.1)
+        assert done and os.waitstatus_to_exitcode(status) == 0
+        pid = 0
     finally:
         if pid:
             os.kill(pid, signal.SIGKILL)

@@ -14,7 +14,10 @@ own rclpy state or signal handlers.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import io
+import sys
 import time
 from typing import Any, Callable, Sequence
 
@@ -55,11 +58,19 @@ def to_rclpy_qos(profile: ros_qos.QosProfile) -> Any:
 
 def make_executor(context: Any) -> Any:
     """rclpy's C++ ``EventsExecutor`` (rclpy >= 7.1 on Jazzy), else the single-threaded one."""
+    from rclpy.executors import SingleThreadedExecutor
+
     try:
         from rclpy.experimental import EventsExecutor
     except ImportError:
-        from rclpy.executors import SingleThreadedExecutor as EventsExecutor
-    return EventsExecutor(context=context)
+        return SingleThreadedExecutor(context=context)
+    # It enables faulthandler on sys.stderr, which has no file descriptor under a notebook or
+    # pytest's capture: the process's own stderr does.
+    with contextlib.redirect_stderr(sys.__stderr__ or sys.stderr):
+        try:
+            return EventsExecutor(context=context)
+        except (io.UnsupportedOperation, ValueError):
+            return SingleThreadedExecutor(context=context)
 
 
 class RclpyTransport:

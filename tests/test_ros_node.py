@@ -1,0 +1,610 @@
+"""``sim_node`` against real ROS 2 (rclpy + rmw_fastrtps_cpp): what a ROS user sees and gets.
+
+Every client here is an rclpy node using the rosidl-generated classes (``growspace_msgs.msg``,
+``sensor_msgs.msg.Image``, ``rcl_interfaces.srv``), never our own codec. One lockstep node is
+shared by the module; the tests that need other command lines start their own. Run inside a
+loopback-only network namespace (``unshare -n``), as ``./run.sh test`` does.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import signal
+import subprocess
+import time
+from typing import Any, Iterator
+
+import gymnasium
+import numpy as np
+import pytest
+import rclpy.qos
+
+from growspace_msgs.msg import LightCommand, ResetRequest, StepResult
+from growspace_msgs.srv import Reset
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
+import growspace_sim.registration  # noqa: F401 - registers the GrowSpace ids
+from growspace_sim.core.config import CHALLENGES
+from growspace_sim.node import interface, params
+from growspace_sim.ros import types
+
+NAMESPACE = f'/gs_node_{secrets.token_hex(3)}'
+NODE = 'growspace_sim'
+EPISODE = 10
+SEED = 1
+
+
+# ----------------------------------------------------------------------------- helpers
+def call(client: Client, srv_type: Any, name: str, request: Any) -> Any:
+    """Call a service from the client's node and wait for its answer."""
+    cli = client.node.create_client(srv_type, name)
+    try:
+        assert client.spin_until(cli.service_is_ready), f'service {name} not available'
+        future = cli.call_async(request)
+        assert client.spin_until(future.done), f'no answer from {name}'
+        return future.result()
+    finally:
+        client.node.destroy_client(cli)
+
+
+def get_params(client: Client, names: list[str], node: str) -> list[ParameterValue]:
+    return call(client, GetParameters, f'{node}/get_parameters',
+                GetParameters.Request(names=names)).values
+
+
+def set_param(client: Client, name: str, value: ParameterValue, node: str) -> Any:
+    request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
+    results = call(client, SetParameters, f'{node}/set_parameters', request).results
+    assert len(results) == 1
+    return results[0]
+
+
+def python_value(value: ParameterValue) -> Any:
+    """The Python value a ParameterValue carries."""
+    by_type = {ParameterType.PARAMETER_BOOL: 'bool_value',
+               ParameterType.PARAMETER_INTEGER: 'integer_value',
+               ParameterType.PARAMETER_DOUBLE: 'double_value',
+               ParameterType.PARAMETER_STRING: 'string_value',
+               ParameterType.PARAMETER_INTEGER_ARRAY: 'integer_array_value'}
+    field = by_type[value.type]
+    out = getattr(value, field)
+    return list(out) if field.endswith('array_value') else out
+
+
+def wait_image(client: Client, result: StepResult) -> Any:
+    """The camera image published with ``result`` (the same header stamp)."""
+    stamp = (result.header.stamp.sec, result.header.stamp.nanosec)
+
+    def find() -> Any:
+        return next((m for m in client.images
+                     if (m.header.stamp.sec, m.header.stamp.nanosec) == stamp), None)
+    assert client.spin_until(lambda: find() is not None), f'no image stamped {stamp}'
+    return find()
+
+
+def reset_and_wait(client: Client, reset_id: int, seed: int, **fields: Any) -> StepResult:
+    result = client.reset(reset_id, has_seed=True, seed=seed, **fields)
+    assert result.info == '', result.info
+    return result
+
+
+def step(client: Client, reset_id: int, step_id: int, action: int) -> StepResult:
+    """One lockstep step; waits for the StepResult of this episode (``Client.step`` may match
+    a late result of an earlier episode with the same step_id)."""
+    client.command.publish(LightCommand(step_id=step_id, mode=LightCommand.MODE_DISCRETE,
+                                        action=action))
+    return client.wait_result(lambda m: m.reset_id == reset_id and m.step_id == step_id)
+
+
+class LoggedNode(NodeProcess):
+    """``NodeProcess`` with its output in files, so a chatty node never blocks on a pipe."""
+
+    def __init__(self, tmp_path: Any, *ros_args: str,
+                 namespace: str | None = NAMESPACE) -> None:
+        remap = ['-r', f'__ns:={namespace}'] if namespace else []
+        self.argv = [sim_node_executable(), '--ros-args', *remap, *ros_args]
+        self.out_path = tmp_path / f'node_{secrets.token_hex(3)}.log'
+        self._out = open(self.out_path, 'w+')  # noqa: SIM115 - closed in stop()
+        self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=subprocess.STDOUT,
+                                     text=True)
+
+    def output(self) -> str:
+        return self.out_path.read_text()
+
+    def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
+        try:
+            if self.proc.poll() is None:
+                self.proc.send_signal(sig)
+            self.proc.wait(timeout=TIMEOUT_S)
+            return self.proc.returncode, self.output()
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait()
+            self._out.close()
+
+
+@pytest.fixture(scope='module')
+def node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LoggedNode]:
+    """One lockstep node for the module: short episodes, seed 1."""
+    process = LoggedNode(tmp_path_factory.mktemp('node'), '-p', f'seed:={SEED}',
+                         '-p', f'episode_length:={EPISODE}')
+    try:
+        yield process
+    finally:
+        code, output = process.stop()
+        assert code == 0, output[-2000:]
+
+
+@pytest.fixture(scope='module')
+def client(node: LoggedNode) -> Iterator[Client]:
+    c = Client(NAMESPACE)
+    try:
+        c.connect()
+        yield c
+    finally:
+        c.close()
+
+
+@pytest.fixture
+def fresh(client: Client) -> Client:
+    """The module client with its received messages cleared."""
+    client.results.clear()
+    client.images.clear()
+    return client
+
+
+# ----------------------------------------------------------------------------- 10. executable
+def test_installed_executable_is_what_ros2_run_starts() -> None:
+    exe = sim_node_executable()
+    assert exe.endswith('install/growspace_sim/lib/growspace_sim/sim_node'), exe
+    assert os.path.isfile(exe) and os.access(exe, os.X_OK), exe
+
+
+# ----------------------------------------------------------------------------- 1. graph
+def test_node_name_and_namespace(client: Client) -> None:
+    assert (NODE, NAMESPACE) in client.node.get_node_names_and_namespaces()
+
+
+def test_topics_and_types(client: Client) -> None:
+    found = dict(client.node.get_topic_names_and_types())
+    for topic in interface.TOPICS:
+        name = topic.name if topic.name.startswith('/') else f'{NAMESPACE}/{topic.name}'
+        assert found.get(name) == [topic.typename], (name, found.get(name))
+
+
+@pytest.mark.parametrize('topic', interface.OUTPUTS, ids=lambda t: t.key)
+def test_publisher_qos_and_type_hash(client: Client, topic: interface.Topic) -> None:
+    name = topic.name if topic.name.startswith('/') else f'{NAMESPACE}/{topic.name}'
+    infos = [i for i in client.node.get_publishers_info_by_topic(name)
+             if i.node_name == NODE and i.node_namespace == NAMESPACE]
+    assert len(infos) == 1, infos
+    info = infos[0]
+    assert info.topic_type == topic.typename
+    assert info.qos_profile.reliability.name.lower() == topic.qos.reliability
+    assert info.qos_profile.durability.name.lower() == topic.qos.durability
+    assert str(info.topic_type_hash) == types.type_hash(topic.typename)
+    assert str(info.topic_type_hash).startswith('RIHS01_')
+
+
+def test_config_is_latched(client: Client) -> None:
+    infos = client.node.get_publishers_info_by_topic(f'{NAMESPACE}/chamber/config')
+    assert [i.qos_profile.durability for i in infos if i.node_name == NODE] == [
+        rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL]
+
+
+@pytest.mark.parametrize('topic', interface.INPUTS, ids=lambda t: t.key)
+def test_subscription_qos_and_type_hash(client: Client, topic: interface.Topic) -> None:
+    infos = [i for i in client.node.get_subscriptions_info_by_topic(
+        f'{NAMESPACE}/{topic.name}') if i.node_name == NODE]
+    assert len(infos) == 1, infos
+    assert infos[0].qos_profile.reliability.name.lower() == topic.qos.reliability
+    assert str(infos[0].topic_type_hash) == types.type_hash(topic.typename)
+
+
+# ----------------------------------------------------------------------------- 2. lockstep
+def test_every_step_answered_exactly_once_across_resets(fresh: Client) -> None:
+    extra = 2  # commands after the episode's end: answered 'episode over', not stepped
+    window = 4  # commands in flight at once
+    for episode in range(3):
+        reset_id = 100 + episode
+        reset_and_wait(fresh, reset_id, seed=episode)
+        ids = list(range(1, EPISODE + extra + 1))
+        for i in ids:
+            fresh.command.publish(LightCommand(step_id=i, mode=LightCommand.MODE_DISCRETE,
+                                               action=i % 3))
+            if i > window:
+                fresh.wait_result(lambda m, j=i - window: m.reset_id == reset_id
+                                  and m.step_id == j)
+        fresh.wait_result(lambda m: m.reset_id == reset_id and m.step_id == ids[-1])
+        fresh.drain(0.2)  # a duplicate answer would arrive now
+        mine = [r for r in fresh.results if r.reset_id == reset_id and r.step_id > 0]
+        counts = {i: sum(r.step_id == i for r in mine) for i in ids}
+        assert counts == dict.fromkeys(ids, 1), counts
+        by_id = {r.step_id: r for r in mine}
+        assert [by_id[i].step for i in ids[:EPISODE]] == ids[:EPISODE]
+        assert [by_id[i].truncated for i in ids] == [False] * (EPISODE - 1) + [True] * (
+            extra + 1)
+        assert all('episode over' in by_id[i].info for i in ids[EPISODE:])
+
+
+def test_same_seed_gives_same_episode_other_seed_differs(fresh: Client) -> None:
+    runs = []
+    for reset_id, seed in ((200, 5), (201, 5), (202, 6)):
+        first = reset_and_wait(fresh, reset_id, seed)
+        images = [bytes(wait_image(fresh, first).data)]
+        rewards = []
+        for i in range(1, 4):
+            result = step(fresh, reset_id, i, 1)
+            rewards.append(result.reward)
+            images.append(bytes(wait_image(fresh, result).data))
+        runs.append((rewards, images))
+    assert runs[0] == runs[1]
+    assert runs[0] != runs[2]
+
+
+@pytest.mark.parametrize('challenge', CHALLENGES)
+def test_episode_over_ros_is_bit_identical_to_in_process(fresh: Client, challenge: str) -> None:
+    env = gymnasium.make(growspace_sim.registration.env_id(challenge, 'easy'),
+                         episode_length=EPISODE)
+    seed, reset_id = 11, 300 + CHALLENGES.index(challenge)
+    try:
+        obs, _ = env.reset(seed=seed)
+        result = reset_and_wait(fresh, reset_id, seed, challenge=challenge, setting='easy')
+        image = wait_image(fresh, result)
+        assert (image.height, image.width) == obs.shape[:2]
+        assert bytes(image.data) == obs.tobytes(), f'{challenge} reset image'
+        env.action_space.seed(seed)
+        for i in range(1, EPISODE + 1):
+            action = env.action_space.sample()
+            obs, reward, terminated, truncated, info = env.step(action)
+            result = step(fresh, reset_id, i, int(action))
+            assert result.info == '', result.info
+            assert result.reward == reward, f'{challenge} step {i}: {result.reward} != {reward}'
+            assert list(result.plant_rewards) == list(info['plant_rewards']), i
+            assert (result.truncated, result.success, result.step) == (
+                truncated, info['success'], info['step']), i
+            assert bytes(wait_image(fresh, result).data) == obs.tobytes(), f'{challenge} {i}'
+        assert truncated
+    finally:
+        env.close()
+        reset_and_wait(fresh, 399, SEED, challenge='control', setting='easy')
+
+
+# ----------------------------------------------------------------------------- 4. reset service
+def test_reset_service_starts_an_episode(fresh: Client) -> None:
+    response = call(fresh, Reset, 'reset', Reset.Request(has_seed=True, seed=3))
+    assert response.success, response.message
+    assert response.message == ''
+    assert response.reset_id > 0
+    result = fresh.wait_result(lambda m: m.reset_id == response.reset_id and m.step_id == 0)
+    assert result.step == 0 and result.info == ''
+    assert step(fresh, response.reset_id, 1, 0).step == 1
+
+
+def test_reset_service_rejects_an_unknown_challenge(fresh: Client) -> None:
+    response = call(fresh, Reset, 'reset', Reset.Request(challenge='bogus'))
+    assert not response.success
+    assert 'challenge' in response.message and 'bogus' in response.message, response.message
+    assert response.reset_id == 0
+
+
+# ----------------------------------------------------------------------------- 7. challenge param
+def test_reset_switching_challenge_shows_in_parameters(fresh: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    try:
+        reset_and_wait(fresh, 500, 1, challenge='shape')
+        assert get_params(fresh, ['challenge'], node)[0].string_value == 'shape'
+        response = call(fresh, Reset, 'reset', Reset.Request(challenge='fairness',
+                                                             setting='hard'))
+        assert response.success, response.message
+        values = get_params(fresh, ['challenge', 'setting'], node)
+        assert [v.string_value for v in values] == ['fairness', 'hard']
+    finally:
+        reset_and_wait(fresh, 501, SEED, challenge='control', setting='easy')
+    assert get_params(fresh, ['challenge', 'setting'], node)[0].string_value == 'control'
+
+
+# ----------------------------------------------------------------------------- 5. parameters
+def test_list_parameters_has_every_field_and_setting(client: Client) -> None:
+    response = call(client, ListParameters, f'{NAMESPACE}/{NODE}/list_parameters',
+                    ListParameters.Request())
+    names = set(response.result.names)
+    missing = {s.name for s in params.specs()} - names
+    assert not missing, missing
+
+
+def test_get_parameters_for_all_names_gives_every_value(client: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    names = list(call(client, ListParameters, f'{node}/list_parameters',
+                      ListParameters.Request()).result.names)
+    values = get_params(client, names, node)
+    assert len(values) == len(names), (len(values), len(names))
+    unset = [n for n, v in zip(names, values) if v.type == ParameterType.PARAMETER_NOT_SET]
+    assert not unset, unset
+    got = {n: python_value(v) for n, v in zip(names, values) if n in params.defaults()}
+    expected = params.defaults() | {'seed': SEED, 'episode_length': EPISODE}
+    assert got == expected
+
+
+def test_set_valid_parameter_is_accepted(client: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    old = get_params(client, ['shape_success'], node)[0].double_value
+    try:
+        result = set_param(client, 'shape_success', ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=0.75), node)
+        assert result.successful, result.reason
+        assert get_params(client, ['shape_success'], node)[0].double_value == 0.75
+    finally:
+        assert set_param(client, 'shape_success', ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=old), node).successful
+
+
+def test_set_invalid_parameter_is_rejected_naming_field_and_value(client: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    result = set_param(client, 'light_density', ParameterValue(
+        type=ParameterType.PARAMETER_INTEGER, integer_value=-5), node)
+    assert not result.successful
+    assert 'light_density' in result.reason and '-5' in result.reason, result.reason
+    assert get_params(client, ['light_density'], node)[0].integer_value == 200
+
+
+@pytest.mark.parametrize('name,value', [
+    ('mode', ParameterValue(type=ParameterType.PARAMETER_STRING, string_value='realtime')),
+    ('rate_hz', ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=99.0))])
+def test_set_read_only_parameter_is_refused(client: Client, name: str,
+                                            value: ParameterValue) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    before = get_params(client, [name], node)[0]
+    result = set_param(client, name, value, node)
+    assert not result.successful
+    assert name in result.reason, result.reason
+    assert get_params(client, [name], node)[0] == before
+
+
+# ----------------------------------------------------------------------------- 3. realtime
+def test_realtime_mode_steps_at_rate_hz(tmp_path: Any) -> None:
+    ns = f'{NAMESPACE}_rt'
+    process = LoggedNode(tmp_path, '-p', 'mode:=realtime', '-p', 'rate_hz:=50.0',
+                         '-p', 'episode_length:=1000', namespace=ns)
+    client = Client(ns)
+    try:
+        client.connect()
+        assert client.spin_until(lambda: len(client.results) > 2)
+        client.results.clear()
+        start = time.monotonic()
+        client.drain(1.0)
+        elapsed = time.monotonic() - start
+        steps = [r.step for r in client.results]
+        assert 30 <= len(steps) / elapsed <= 70, (len(steps), elapsed)
+        assert steps == list(range(steps[0], steps[0] + len(steps))), steps
+        assert all(r.step_id == 0 for r in client.results)
+        stamps = [r.header.stamp.sec * 10**9 + r.header.stamp.nanosec for r in client.results]
+        assert set(np.diff(stamps)) == {20_000_000}  # sim time: 1/rate_hz per step
+    finally:
+        client.close()
+        code, output = process.stop()
+    assert code == 0, output[-2000:]
+
+
+# ----------------------------------------------------------------------------- 6. command line
+@pytest.fixture(scope='module')
+def remapped(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[LoggedNode, str]]:
+    """A node started with a namespace, a node name, a topic remap, a params file and -p."""
+    tmp = tmp_path_factory.mktemp('cli')
+    params_file = tmp / 'params.yaml'
+    params_file.write_text('/**:\n  ros__parameters:\n    light_density: 100\n')
+    ns = f'/x_{secrets.token_hex(3)}'
+    process = LoggedNode(tmp, '-r', '__node:=other_name', '-r', 'step_result:=results',
+                         '--params-file', str(params_file), '-p', 'episode_length:=7',
+                         '-p', 'rate_hz:=20', '-p', 'bogus_param:=1', namespace=ns)
+    try:
+        yield process, ns
+    finally:
+        code, output = process.stop()
+        assert code == 0, output[-2000:]
+
+
+@pytest.fixture(scope='module')
+def remapped_client(remapped: tuple[LoggedNode, str]) -> Iterator[Client]:
+    _, ns = remapped
+    c = Client(ns)
+    results: list[StepResult] = []
+    c.node.create_subscription(StepResult, 'results', results.append, 100)
+    c.remapped_results = results  # type: ignore[attr-defined]
+    try:
+        assert c.spin_until(lambda: ('other_name', ns) in
+                            c.node.get_node_names_and_namespaces()), 'node did not appear'
+        assert c.spin_until(lambda: c.command.get_subscription_count() > 0
+                            and c.node.count_publishers(f'{ns}/results') > 0)
+        c.drain(0.3)
+        yield c
+    finally:
+        c.close()
+
+
+def test_node_name_and_namespace_remaps(remapped: tuple[LoggedNode, str],
+                                        remapped_client: Client) -> None:
+    _, ns = remapped
+    graph = remapped_client.node.get_node_names_and_namespaces()
+    assert ('other_name', ns) in graph
+    assert (NODE, ns) not in graph
+
+
+def test_topic_remap_moves_step_results(remapped: tuple[LoggedNode, str],
+                                        remapped_client: Client) -> None:
+    _, ns = remapped
+    topics = dict(remapped_client.node.get_topic_names_and_types())
+    assert topics.get(f'{ns}/results') == [types.STEP_RESULT]
+    assert remapped_client.node.count_publishers(f'{ns}/step_result') == 0
+    results = remapped_client.remapped_results  # type: ignore[attr-defined]
+    remapped_client.reset_pub.publish(ResetRequest(reset_id=7, has_seed=True, seed=2))
+    assert remapped_client.spin_until(lambda: any(r.reset_id == 7 for r in results))
+    remapped_client.command.publish(LightCommand(step_id=1, mode=LightCommand.MODE_DISCRETE,
+                                                 action=0))
+    assert remapped_client.spin_until(lambda: any(r.step_id == 1 and r.reset_id == 7
+                                                  for r in results))
+
+
+def test_params_file_and_overrides_reach_the_node(remapped: tuple[LoggedNode, str],
+                                                  remapped_client: Client) -> None:
+    _, ns = remapped
+    values = get_params(remapped_client, ['light_density', 'episode_length', 'rate_hz'],
+                        f'{ns}/other_name')
+    assert values[0].integer_value == 100  # from the params file
+    assert values[1].integer_value == 7  # -p
+    assert values[2].type == ParameterType.PARAMETER_DOUBLE  # -p rate_hz:=20 is a double
+    assert values[2].double_value == 20.0
+
+
+def test_unknown_parameter_is_warned_about_by_name(remapped: tuple[LoggedNode, str],
+                                                   remapped_client: Client) -> None:
+    process, _ = remapped
+    assert process.proc.poll() is None, process.output()[-2000:]
+    assert remapped_client.spin_until(lambda: 'bogus_param' in process.output(), 5.0), \
+        process.output()[-2000:]
+
+
+def test_invalid_parameter_exits_2_with_one_line() -> None:
+    proc = subprocess.run([sim_node_executable(), '--ros-args', '-r', f'__ns:={NAMESPACE}_bad',
+                           '-p', 'light_density:=-5'],
+                          capture_output=True, text=True, timeout=TIMEOUT_S)
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert 'light_density' in lines[0] and '-5' in lines[0], lines[0]
+
+
+# ----------------------------------------------------------------------------- 8. recording
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_recording_is_finished_by_a_signal_and_resimulates(tmp_path: Any, sig: int) -> None:
+    from growspace_sim.replay import resimulate
+
+    path = tmp_path / 'run.mcap'
+    ns = f'{NAMESPACE}_rec_{int(sig)}'
+    process = LoggedNode(tmp_path, '-p', f'record_path:={path}', '-p', 'seed:=4',
+                         namespace=ns)
+    client = Client(ns)
+    try:
+        client.connect()
+        reset_and_wait(client, 1, seed=9)
+        for i in range(1, 6):
+            assert step(client, 1, i, i % 3).info == ''
+    finally:
+        client.close()
+        code, output = process.stop(sig)
+    assert code == 0, output[-2000:]
+    assert 'Traceback' not in output, output[-2000:]
+    report = resimulate(path)
+    assert report.ok, (report.mismatch, report.warnings)
+    assert report.episodes >= 2 and report.steps >= 5, report
+
+
+# ----------------------------------------------------------------------------- 11. signals
+# Delays within rclpy's and the node's start-up (imports end at about 0.2 s on an idle machine;
+# a signal before the interpreter has run our module gets the default action, no file exists).
+@pytest.mark.parametrize('delay_s', [0.5, 1.0])
+def test_sigterm_during_start_up_exits_cleanly(delay_s: float) -> None:
+    proc = subprocess.Popen([sim_node_executable(), '--ros-args', '-r',
+                             f'__ns:={NAMESPACE}_early'],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay_s)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, (proc.returncode, err[-2000:])
+    assert 'Traceback' not in err, err[-2000:]
+
+
+# ----------------------------------------------------------------------------- 9. CDR bytes
+def _plain(typename: str, k: int) -> dict[str, Any]:
+    """Non-default values for every field of a type (``k`` varies them between fields)."""
+    from rosbags.typesys.base import Nodetype
+
+    def base(kind: str, i: int) -> Any:
+        if kind == 'bool':
+            return True
+        if kind == 'string':
+            return 'chamber_' + 'x' * (i % 5)  # lengths vary, so padding varies
+        if kind.startswith('float'):
+            return -1.5 + 0.25 * i  # exact in float32 too
+        if kind.startswith('uint'):
+            bits = 8 if kind == 'uint8' else int(kind[4:])
+            return (2**bits - 1 - i) if bits < 64 else 2**64 - 1 - i
+        bits = 8 if kind == 'int8' else int(kind[3:])
+        return -(2**(bits - 1)) + i
+
+    out: dict[str, Any] = {}
+    for i, (name, (kind, arg)) in enumerate(types.typestore().fielddefs[typename][1], k):
+        if kind == Nodetype.BASE:
+            out[name] = base(arg[0], i)
+        elif kind == Nodetype.NAME:
+            out[name] = _plain(arg, i + 1)
+        else:
+            (sub_kind, sub_arg), length = arg
+            assert sub_kind == Nodetype.BASE, (typename, name)
+            out[name] = [base(sub_arg[0], i + j) for j in range(length or 3)]
+    return out
+
+
+def _generated(typename: str, plain: dict[str, Any]) -> Any:
+    """The rosidl-generated message of ``typename`` holding ``plain``."""
+    import importlib
+
+    package, kind, name = typename.split('/')
+    module = importlib.import_module(f'{package}.{kind}')
+    if kind == 'srv':
+        service, part = name.rsplit('_', 1)
+        msg = getattr(getattr(module, service), part)()
+    else:
+        msg = getattr(module, name)()
+    fields = dict(types.typestore().fielddefs[typename][1])
+    for field, value in plain.items():
+        if isinstance(value, dict):
+            value = _generated(fields[field][1], value)
+        elif isinstance(value, list) and isinstance(getattr(msg, field), np.ndarray):
+            value = np.asarray(value, getattr(msg, field).dtype)
+        setattr(msg, field, value)
+    return msg
+
+
+CDR_TYPES = [*types.growspace_types(), 'sensor_msgs/msg/Image', 'std_msgs/msg/String',
+             'rosgraph_msgs/msg/Clock']
+
+
+def _padding(typename: str, msg: Any) -> set[int]:
+    """Offsets of the alignment padding in our CDR bytes of ``msg`` (bytes CDR never writes)."""
+    msgdef = types.typestore().get_msgdef(typename)
+    size = msgdef.getsize_cdr(0, msg, types.typestore())
+    filled = []
+    for fill in (0x00, 0xFF):
+        data = bytearray([fill]) * size
+        msgdef.serialize_cdr_le(memoryview(data), 0, msg, types.typestore())
+        filled.append(data)
+    return {4 + i for i in range(size) if filled[0][i] != filled[1][i]}
+
+
+@pytest.mark.parametrize('typename', CDR_TYPES)
+def test_our_cdr_bytes_equal_rclpy_serialization(typename: str) -> None:
+    """Equal bytes, except the values of alignment padding: Fast CDR leaves it unwritten."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    plain = _plain(typename, 1)
+    msg = types.from_plain(typename, plain)
+    ours = types.serialize(msg, typename)
+    generated = _generated(typename, plain)
+    theirs = serialize_message(generated)
+    assert len(ours) == len(theirs), typename
+    padding = _padding(typename, msg)
+    differ = {i for i in range(len(ours)) if ours[i] != theirs[i]}
+    assert differ <= padding, (typename, sorted(differ - padding))
+    assert all(ours[i] == 0 for i in padding)  # ours: zeros, deterministic
+    assert deserialize_message(ours, type(generated)) == generated
+    assert types.serialize(types.deserialize(theirs, typename), typename) == ours
+    assert ours != types.serialize(types.new(typename), typename)  # not all defaults
