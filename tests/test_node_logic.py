@@ -109,20 +109,38 @@ def test_step_result_is_published_last() -> None:
     assert order[-1] == '/chamber1/step_result' and len(order) == 5
 
 
-def test_duplicate_late_and_zero_step_ids_are_dropped_with_a_warning() -> None:
+def test_duplicate_late_and_zero_step_ids_are_answered_with_an_error_and_a_warning() -> None:
     transport, node = make()
     transport.inject('light/command', command(5, action=1))
     count = len(transport.messages('step_result'))
-    transport.inject('light/command', command(5, action=1))
-    transport.inject('light/command', command(3, action=1))
-    assert len(transport.messages('step_result')) == count
-    assert 'step_id = 5 dropped' in transport.warnings[-1]
-    transport.time_s += 10  # past the throttle
-    transport.inject('light/command', command(0, action=1))
+    for step_id in (5, 3, 0):  # two kinds of warning: neither hides the other
+        transport.inject('light/command', command(step_id, action=1))
+        result = last_result(transport)
+        assert (result.step_id, result.step) == (step_id, 1)
+        assert result.info.startswith(f'error: step_id = {step_id} ') and '> 5' in result.info
+    assert len(transport.messages('step_result')) == count + 3
+    assert 'step_id = 5 is a duplicate' in transport.warnings[-2]
     assert 'step_id = 0' in transport.warnings[-1] and 'realtime' in transport.warnings[-1]
-    assert len(transport.messages('step_result')) == count
     transport.inject('light/command', command(6, action=1))
     assert last_result(transport).step_id == 6 and last_result(transport).step == 2
+    assert last_result(transport).info == ''
+
+
+def test_a_gap_in_step_ids_is_reported() -> None:
+    transport, node = make()
+    transport.inject('light/command', command(1, action=1))
+    transport.inject('light/command', command(4, action=1))
+    assert last_result(transport).step == 2
+    assert 'step_ids 2..3 never arrived' in transport.warnings[-1]
+
+
+def test_a_clamped_absolute_command_is_reported_naming_field_and_value() -> None:
+    transport, node = make()
+    transport.inject('light/command', command(1, mode=convert.MODE_BEAM, x=5.0, width=1e300))
+    result = last_result(transport)
+    assert result.info == '' and result.step == 1
+    assert any('x = 5.0 m' in w and 'clamped' in w for w in transport.warnings)
+    assert any('width = 1e+300 m' in w for w in transport.warnings)
 
 
 def test_warnings_are_throttled_per_field() -> None:

@@ -183,15 +183,20 @@ class ChamberNode:
 
     def _lockstep(self, msg: Any) -> None:
         step_id = int(msg.step_id)
-        if step_id == 0:
-            self.log.warn('command:step_id', 'light/command: step_id = 0 is not allowed in '
-                          'lockstep mode; expected step_id > the last processed step_id '
-                          f'({self.last_step_id}), or run the node with mode:=realtime.')
+        if step_id == 0 or step_id <= self.last_step_id:
+            # Answered, so a client never waits in vain; ids must rise within an episode.
+            kind = 'zero' if step_id == 0 else 'stale'
+            error = (f'step_id = {step_id} is not allowed in lockstep mode' if step_id == 0 else
+                     f'step_id = {step_id} is a duplicate or late command') + (
+                f'; expected step_id > {self.last_step_id} (the last processed since the reset)'
+                f', or mode:=realtime.')
+            self.log.warn(f'command:step_id:{kind}', f'light/command: dropped: {error}')
+            self._publish_result(step_id, self.reset_id, info=f'error: {error}')
             return
-        if step_id <= self.last_step_id:
-            self.log.warn('command:step_id', f'light/command: step_id = {step_id} dropped: '
-                          f'expected > {self.last_step_id} (duplicate or late command).')
-            return
+        if step_id > self.last_step_id + 1 and self.last_step_id:
+            self.log.warn('command:gap', f'light/command: step_ids {self.last_step_id + 1}..'
+                          f'{step_id - 1} never arrived (lost, or skipped by the client); '
+                          f'stepping {step_id}.')
         self.last_step_id = step_id
         if self.episode_over:
             self.log.warn('command:episode', f'light/command: step_id {step_id} not stepped: '
@@ -223,6 +228,14 @@ class ChamberNode:
             field = str(e).split(' ', 1)[0]
             self.log.warn(f'command:{field}', f'light/command: {consequence}: {e}')
             return f'error: {e}'
+        if int(msg.mode) in (convert.MODE_BEAM, convert.MODE_SPOT):
+            light = self.sim.chamber.light
+            for field in ('x', 'z', 'radius') if light.spot else ('x', 'width'):
+                asked, applied = float(getattr(msg, field)), getattr(light, field)
+                if asked != applied:
+                    self.log.warn(f'command:clamped:{field}', f'light/command: {field} = '
+                                  f'{asked!r} m is outside the light\'s limits; clamped to '
+                                  f'{applied!r} m.')
         return ''
 
     def _step(self, step_id: int, info: str = '') -> None:

@@ -9,8 +9,8 @@ does not need it.
 
 | topic | type | direction | QoS |
 |---|---|---|---|
-| ``reset`` | growspace_msgs/ResetRequest | in | reliable, keep_last 100 |
-| ``light/command`` | growspace_msgs/LightCommand | in | reliable, keep_last 100 |
+| ``reset`` | growspace_msgs/ResetRequest | in | reliable, keep_all |
+| ``light/command`` | growspace_msgs/LightCommand | in | reliable, keep_all |
 | ``chamber/config`` | std_msgs/String (JSON, ``config_json``) | out | reliable, depth 1, latched |
 | ``/clock`` | rosgraph_msgs/Clock (sim time) | out | reliable, keep_last 1 |
 | ``camera/image_raw`` | sensor_msgs/Image (rgb8) | out | reliable, keep_last 10 |
@@ -33,7 +33,8 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.ros import qos as ros_qos, types
 
 STRING = 'std_msgs/msg/String'
-COMMAND_QOS = ros_qos.QosProfile(depth=100)  # deep enough that a lockstep client never loses one
+# keep_all + reliable: a flood makes the sender wait (flow control) instead of losing commands.
+COMMAND_QOS = ros_qos.QosProfile(history='keep_all')
 OBSERVATION_QOS = ros_qos.QosProfile(depth=10)
 METADATA_NAME = 'growspace'  # name of the recording's metadata record (``growspace_metadata``)
 FORMAT = 'growspace-recording/1'  # bump when the topics or the metadata keys change meaning
