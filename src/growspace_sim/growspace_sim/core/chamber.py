@@ -29,6 +29,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.tasks import distance_reward, draw_layout, jaccard
 
 _DIRECTION_EPS = 1e-12  # a sum of unit vectors this short has no direction: the bud stays
+ANCESTOR_WINDOW = 64  # ancestors listed per node: deeper ones cost one more gather per 64 levels
 
 
 class StepOutcome(NamedTuple):
@@ -62,6 +63,7 @@ class Chamber:
         self._longest = max(cfg.branch_length_m, cfg.width_m(cfg.first_branch_height))
         self._sample_steps: dict[int, np.ndarray] = {}
         self._capacity = 2 * cfg.plant_count + cfg.max_branching * cfg.episode_length
+        self._window = min(cfg.episode_length + 2, ANCESTOR_WINDOW)
         self.light: lights.Light | None = None
         self.steps = 0
 
@@ -85,11 +87,12 @@ class Chamber:
         self.parent = np.full(cap, -1, np.int32)
         self.plant = np.zeros(cap, np.int16)
         self.has_child = np.zeros(cap, bool)
-        self._descendants = np.zeros(cap + 1, np.int32)  # the last slot absorbs the sentinel
+        self._descendants = np.zeros(cap + 1, np.int32)  # node i at i + 1; [0] counts blanks
         self._depth = np.zeros(cap, np.int32)
-        # Row i lists node i's ancestors (padded with the sentinel `cap`), so one bincount
-        # over the new rows updates every descendant count along their paths.
-        self._ancestors = np.full((cap, cfg.episode_length + 2), cap, np.int32)
+        # Row i lists 1 + node i's nearest ancestors (0 = none) at column depth % window, so
+        # one bincount over the new rows updates the descendant counts along their paths.
+        # np.zeros leaves untouched rows unmapped: memory grows with the nodes grown.
+        self._ancestors = np.zeros((cap, self._window), np.int32)
         self.n_nodes = 0
         self._branch_counts = np.zeros(n, np.int64)
         self._nearest = np.full(n, np.inf)  # m, per plant: closest node to the target
@@ -217,16 +220,34 @@ class Chamber:
         self._branch_counts += np.bincount(plants, minlength=self._branch_counts.size)
         depth = self._depth[parents]
         self._depth[start:end] = depth + 1
-        ancestors = self._ancestors[parents]
-        ancestors[np.arange(new.size), depth] = parents
-        self._ancestors[start:end] = ancestors
-        self._descendants += np.bincount(ancestors.ravel(), minlength=self._descendants.size)
+        self._count_descendants(parents, depth, start, end)
         if self.target is not None:
             np.minimum.at(self._nearest, plants, np.abs(new - self.target))
         if self.target_mask is not None:
             self._rasterise(self._samples(self.pos[parents], new, 0.5 * self._pixel))
         self._update_photons(self.pos[parents], new, start)
         self._outcome_cache = self._tips_cache = None
+
+    def _count_descendants(self, parents: np.ndarray, depth: np.ndarray, start: int,
+                           end: int) -> None:
+        """Give the new nodes start..end their ancestor rows and add one descendant to each
+        of their ancestors.
+
+        A row holds the ``window`` nearest ancestors; a node deeper than that reaches the rest
+        through the row of its oldest listed ancestor, and so on up to the root.
+        """
+        window, table = self._window, self._ancestors
+        ancestors = table[parents]
+        ancestors[np.arange(parents.size), depth % window] = parents + 1
+        table[start:end] = ancestors
+        counts = np.bincount(ancestors.ravel(), minlength=end + 1)
+        anchors = ancestors[depth >= window, (depth[depth >= window] + 1) % window] - 1
+        while anchors.size:
+            rows = table[anchors]
+            counts += np.bincount(rows.ravel(), minlength=end + 1)
+            deep = self._depth[anchors] > window
+            anchors = rows[deep, self._depth[anchors][deep] % window] - 1
+        self._descendants[:end + 1] += counts
 
     def _update_photons(self, a: np.ndarray, b: np.ndarray, first: int) -> None:
         """Re-point photons to the new nodes b (numbered from ``first``) where those are nearer,
@@ -313,7 +334,7 @@ class Chamber:
     @property
     def descendants(self) -> np.ndarray:
         """(N,) number of nodes above each node in its plant; a read-only view."""
-        view = self._descendants[:self.n_nodes]
+        view = self._descendants[1:self.n_nodes + 1]
         view.flags.writeable = False
         return view
 

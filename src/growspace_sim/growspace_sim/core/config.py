@@ -15,6 +15,10 @@ from dataclasses import dataclass
 CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
 SETTINGS = ('easy', 'hard')
 REFERENCE_IMAGE_SIZE = 84  # px; the paper states light displacement in pixels of this image
+# Bounds that keep an episode within a small machine (2 cores, 24 GB): memory grows linearly with
+# the node slots (about 300 B each, chamber and renderer), the photons and the canopy columns.
+MAX_NODES = 2_000_000  # node slots: max_branching x episode_length; about 600 MB at most
+MIN_THICKNESS = 0.001  # fraction of the width: at most 1,000 canopy columns
 
 
 @dataclass(frozen=True)
@@ -59,11 +63,18 @@ class SimConfig:
             _check_range(name, getattr(self, name), 0.01, 100.0)
         if self.image_size != 0:
             _check_range('image_size', self.image_size, 8, 1024, integer=True)
-        _check_range('episode_length', self.episode_length, 1, 1_000_000, integer=True)
+        _check_range('episode_length', self.episode_length, 1, 100_000, integer=True)
         _check_range('light_density', self.light_density, 1, 100_000, integer=True)
-        _check_range('max_branching', self.max_branching, 1, 1000, integer=True)
+        _check_range('max_branching', self.max_branching, 1, 100, integer=True)
+        if self.max_branching * self.episode_length > MAX_NODES:
+            raise ValueError(
+                f'max_branching x episode_length ({self.max_branching} x {self.episode_length}'
+                f' = {self.max_branching * self.episode_length}) must be in [1, {MAX_NODES}]: '
+                f'the chamber keeps room for every node an episode can grow.')
+        # The canopy has one column per branch thickness: a floor keeps it small.
+        _check_range('branch_thickness', self.branch_thickness, MIN_THICKNESS, 1.0)
         for name in ('photon_min_height', 'first_branch_height', 'branch_length',
-                     'branch_thickness', 'radius_of_influence', 'kill_distance', 'light_width',
+                     'radius_of_influence', 'kill_distance', 'light_width',
                      'light_width_min', 'light_width_max', 'spot_radius', 'spot_radius_min',
                      'spot_radius_max', 'target_radius', 'shape_success'):
             _check_range(name, getattr(self, name), 0.0, 1.0, low_open=True)
