@@ -11,12 +11,14 @@ import pytest
 
 from growspace_sim.core import chamber as chamber_module, light as lights
 from growspace_sim.core.chamber import Chamber
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.core.tasks import distance_reward, jaccard
 
 from conftest import child_env
 
-ALL_CASES = [(c, s) for c in CHALLENGES for s in SETTINGS]
+CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')  # the built-in tasks
+ALL_CASES = [(c, s) for c in CHALLENGES for s in tasks.SETTINGS]
 DIGIT = np.zeros((28, 28), np.uint8)
 DIGIT[6:22, 11:17] = 255  # a hand-made '1': tests use data the project makes
 
@@ -275,11 +277,10 @@ def test_jaccard_known_values():
 
 def test_a_plant_covering_the_digit_exactly_scores_one():
     chamber = make('shape')
-    chamber.reset(np.random.default_rng(0), DIGIT)
-    chamber.occupancy[:] = chamber.target_mask  # a crafted plant with exactly the digit's pixels
-    chamber._outcome_cache = None
-    assert chamber.current_reward().reward == 1.0
-    assert chamber.current_reward().success
+    state = chamber.reset(np.random.default_rng(0), DIGIT)
+    state.occupancy[:] = state.target_mask  # a crafted plant with exactly the digit's pixels
+    reward, plant_rewards, success = chamber.task.score(state, chamber.cfg)
+    assert reward == 1.0 and plant_rewards.tolist() == [1.0] and success
 
 
 def test_shape_reward_counts_plant_pixels_not_light_pixels():

@@ -35,7 +35,7 @@ import numpy as np
 import growspace_sim  # noqa: F401  (registers the ids)
 from growspace_sim.core import light as lights
 from growspace_sim.core.chamber import Chamber
-from growspace_sim.core.config import CHALLENGES
+from growspace_sim.core import task as tasks
 from growspace_sim.registration import env_id
 from growspace_sim.simulation import Simulation
 
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--episodes', type=int, default=200, help='timed episodes per repeat')
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--challenges', default=','.join(CHALLENGES))
+    parser.add_argument('--challenges', default=','.join(tasks.names()))
     parser.add_argument('--profile', action='store_true', help='profile the control env')
     args = parser.parse_args(argv)
     pinned = hasattr(os, 'sched_setaffinity')
