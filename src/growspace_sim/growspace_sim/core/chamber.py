@@ -71,6 +71,7 @@ class Chamber:
         self._sample_steps: dict[int, np.ndarray] = {}
         self._capacity = 2 * cfg.plant_count + cfg.max_branching * cfg.episode_length
         self._window = min(cfg.episode_length + 2, ANCESTOR_WINDOW)
+        self._deep = cfg.episode_length + 2 > ANCESTOR_WINDOW  # a node can outgrow its row
         self.state: ChamberState | None = None
         self._outcome_cache: tuple[float, np.ndarray, bool] | None = None
         self._tips_cache: tuple[np.ndarray, ...] | None = None
@@ -248,15 +249,22 @@ class Chamber:
         """
         window, table = self._window, s.ancestors
         ancestors = table[parents]
+        if not self._deep:  # episodes shorter than the window: every row lists all ancestors
+            ancestors[np.arange(parents.size), depth] = parents + 1
+            table[start:end] = ancestors
+            s.descendants[:end + 1] += np.bincount(ancestors.ravel(), minlength=end + 1)
+            return
         ancestors[np.arange(parents.size), depth % window] = parents + 1
         table[start:end] = ancestors
         counts = np.bincount(ancestors.ravel(), minlength=end + 1)
-        anchors = ancestors[depth >= window, (depth[depth >= window] + 1) % window] - 1
+        incomplete = depth >= window
+        anchors = ancestors[incomplete, (depth[incomplete] + 1) % window] - 1
         while anchors.size:
             rows = table[anchors]
             counts += np.bincount(rows.ravel(), minlength=end + 1)
-            deep = s.depth[anchors] > window
-            anchors = rows[deep, s.depth[anchors][deep] % window] - 1
+            anchor_depth = s.depth[anchors]
+            incomplete = anchor_depth > window
+            anchors = rows[incomplete, anchor_depth[incomplete] % window] - 1
         s.descendants[:end + 1] += counts
 
     def _update_photons(self, s: ChamberState, a: np.ndarray, b: np.ndarray,
