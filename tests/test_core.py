@@ -381,6 +381,16 @@ def test_cross_field_rules():
         SimConfig(max_branching=100, episode_length=100_000)
 
 
+@pytest.mark.parametrize('field, value, allowed', [
+    ('episode_length', 100_001, r'\[1, 100000\]'), ('max_branching', 101, r'\[1, 100\]'),
+    ('light_density', 100_001, r'\[1, 100000\]'),
+    ('branch_thickness', 0.0005, r'\[0.001, 1.0\]')])
+def test_bounds_keep_an_episode_on_a_small_machine(field, value, allowed):
+    with pytest.raises(ValueError, match=f'{field} must be in {allowed}, got {value}'):
+        SimConfig(**{field: value})
+    SimConfig(episode_length=20_000, light_density=12_800)  # the issue's rows are accepted
+
+
 def test_long_episodes_reset_in_linear_memory():
     """Issue 10: episode_length 20,000 used to need an 11.9 GiB ancestors table."""
     code = ('import resource, time, numpy as np\n'
