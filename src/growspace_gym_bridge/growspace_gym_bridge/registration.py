@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from growspace_sim.registration import CHALLENGE_IDS, env_id
+from growspace_sim.core import task as tasks
+from growspace_sim.registration import env_id
 
 PREFIX = 'GrowSpaceROS'
 ENTRY_POINT = 'growspace_gym_bridge.envs:GrowSpaceBridgeEnv'
@@ -22,18 +23,18 @@ def bridge_id(challenge: str, setting: str, continuous: bool = False) -> str:
 
 
 def register_bridge_envs() -> list[str]:
-    """Register every challenge x setting (discrete and continuous); idempotent.
+    """Register every task x setting (discrete and continuous); idempotent.
 
     Returns:
         All bridged ids.
     """
     ids = []
-    for challenge in CHALLENGE_IDS:
-        for setting in ('easy', 'hard'):
+    for task in tasks.all_tasks():
+        for setting in task.settings:
             for continuous in (False, True):
-                name = bridge_id(challenge, setting, continuous)
+                name = bridge_id(task.name, setting, continuous)
                 ids.append(name)
                 if name not in gym.registry:
                     gym.register(name, entry_point=ENTRY_POINT, kwargs={
-                        'challenge': challenge, 'setting': setting, 'continuous': continuous})
+                        'challenge': task.name, 'setting': setting, 'continuous': continuous})
     return sorted(ids)

@@ -8,7 +8,9 @@ the core alone (no rendering, no Gymnasium) on the same seeds so the ratio shows
 The process is pinned to one CPU. Rates are per second of the process's CPU time, which a
 shared virtual machine's stolen time does not inflate; the wall-clock rate of the same repeat
 is shown beside it. Also reported: mean reset time, mean segments per plant at
-step 50 and the peak resident memory.
+step 50 and the peak resident memory. A second table shows how resources grow with the episode
+length and the light density: each row runs in a fresh process (its own peak memory), resets the
+control env three times (best reset time) and plays one random episode.
 
     growspace-bench                 # all challenges
     growspace-bench --profile       # and where the time goes in control (cProfile top 15)
@@ -17,8 +19,10 @@ step 50 and the peak resident memory.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import cProfile
 import io
+import multiprocessing
 import os
 import pstats
 import resource
@@ -31,11 +35,13 @@ import numpy as np
 import growspace_sim  # noqa: F401  (registers the ids)
 from growspace_sim.core import light as lights
 from growspace_sim.core.chamber import Chamber
-from growspace_sim.core.config import CHALLENGES
+from growspace_sim.core import task as tasks
 from growspace_sim.registration import env_id
 from growspace_sim.simulation import Simulation
 
 TARGETS = {'control': 10_000, 'fairness': 5_000}  # steps/s on one core, from the issue
+RESOURCE_ROWS = ({}, {'episode_length': 20_000}, {'light_density': 12_800})
+RESOURCE_TARGETS = {'episode_length': (50.0, 200.0)}  # reset ms, peak MiB; from issue 10
 
 
 def run_env(name: str, episodes: int, seed: int) -> tuple[float, float, float, float]:
@@ -76,6 +82,24 @@ def run_core(challenge: str, episodes: int, seed: int) -> float:
     return steps / (time.process_time() - start)
 
 
+def run_resources(overrides: dict[str, int], seed: int) -> tuple[float, float, float]:
+    """(best reset ms, seconds of one random episode, peak RSS MiB) of the control env with
+    these SimConfig overrides; call it in a fresh process for a meaningful peak."""
+    env = gym.make(env_id('control', 'easy'), **overrides)
+    reset_s = []
+    for episode in range(3):
+        t = time.perf_counter()
+        env.reset(seed=seed + episode)
+        reset_s.append(time.perf_counter() - t)
+    env.action_space.seed(seed)
+    start, truncated = time.perf_counter(), False
+    while not truncated:
+        truncated = env.step(env.action_space.sample())[3]
+    episode_s = time.perf_counter() - start
+    env.close()
+    return min(reset_s) * 1e3, episode_s, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def best_of(repeats: int, fn, *args):
     results = [fn(*args) for _ in range(repeats)]
     return max(results, key=lambda r: r[0] if isinstance(r, tuple) else r)
@@ -86,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--episodes', type=int, default=200, help='timed episodes per repeat')
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--challenges', default=','.join(CHALLENGES))
+    parser.add_argument('--challenges', default=','.join(tasks.names()))
     parser.add_argument('--profile', action='store_true', help='profile the control env')
     args = parser.parse_args(argv)
     pinned = hasattr(os, 'sched_setaffinity')
@@ -120,7 +144,20 @@ def _report(args: argparse.Namespace) -> None:
         print(f'| {challenge} | {rate:,.0f} | {wall:,.0f} | {core:,.0f} | {rate / core:.2f} | '
               f'{reset_s * 1e3:.2f} | {segments:.1f} | {verdict} |')
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f'\npeak RSS {peak_mib:.0f} MiB')
+    print(f'\npeak RSS {peak_mib:.0f} MiB\n')
+    print('| control env, changed from the defaults | reset ms | one episode s | peak RSS MiB '
+          '| target |')
+    print('|---|---|---|---|---|')
+    spawn = multiprocessing.get_context('spawn')  # a fresh interpreter: its own peak RSS
+    for overrides in RESOURCE_ROWS:
+        with concurrent.futures.ProcessPoolExecutor(1, mp_context=spawn) as pool:
+            reset_ms, episode_s, peak = pool.submit(run_resources, overrides, args.seed).result()
+        label = ', '.join(f'{k} {v:,}' for k, v in overrides.items()) or 'none (defaults)'
+        target = next((RESOURCE_TARGETS[k] for k in overrides if k in RESOURCE_TARGETS), None)
+        verdict = '' if target is None else (
+            f'< {target[0]:.0f} ms, < {target[1]:.0f} MiB: '
+            f'{"met" if reset_ms < target[0] and peak < target[1] else "NOT met"}')
+        print(f'| {label} | {reset_ms:.2f} | {episode_s:.2f} | {peak:.0f} | {verdict} |')
     if args.profile:
         profiler = cProfile.Profile()
         profiler.runcall(run_env, env_id('control', 'easy'), 100, args.seed)

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from growspace_sim.core.chamber import Chamber, StepOutcome
-from growspace_sim.core.config import CHALLENGES, SETTINGS
+from growspace_sim.core import task as tasks
 from growspace_sim.core.light import Light
 from growspace_sim.ros import types
 
@@ -135,10 +135,10 @@ def reset_args(msg: Any) -> tuple[int | None, str | None, str | None]:
     """
     challenge = msg.challenge or None
     setting = msg.setting or None
-    if challenge is not None and challenge not in CHALLENGES:
-        _reject('challenge', challenge, f'one of {CHALLENGES} or empty (keep)')
-    if setting is not None and setting not in SETTINGS:
-        _reject('setting', setting, f'one of {SETTINGS} or empty (keep)')
+    if challenge is not None and challenge not in tasks.names():
+        _reject('challenge', challenge, f'one of {tasks.names()} or empty (keep)')
+    if setting is not None and setting not in tasks.SETTINGS:
+        _reject('setting', setting, f'one of {tasks.SETTINGS} or empty (keep)')
     seed = int(msg.seed) if msg.has_seed else None
     if seed is not None and seed > MAX_SEED:
         _reject('seed', seed, f'an int in [0, {MAX_SEED}]')

@@ -21,7 +21,7 @@ import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
 from growspace_sim.agents import OracleAgent, RandomAgent, run_episode
-from growspace_sim.core.config import CHALLENGES, SETTINGS
+from growspace_sim.core import task as tasks
 from growspace_sim.registration import env_id
 
 COLUMNS = ('challenge', 'setting', 'episodes', 'random_mean', 'random_se', 'oracle_mean',
@@ -74,16 +74,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--episodes', type=int, default=100, help='episodes per agent and case')
     parser.add_argument('--seed', type=int, default=0, help='first episode seed')
-    parser.add_argument('--challenges', default=','.join(CHALLENGES))
-    parser.add_argument('--settings', default=','.join(SETTINGS))
+    parser.add_argument('--challenges', default=','.join(tasks.names()))
+    parser.add_argument('--settings', default=','.join(tasks.SETTINGS))
     parser.add_argument('--csv', help='also write the rows to this CSV file')
     args = parser.parse_args(argv)
     if args.episodes < 2:
         parser.error(f'--episodes must be >= 2 for a standard error, got {args.episodes}')
     challenges = args.challenges.split(',')
     settings = args.settings.split(',')
-    for name, values, allowed in (('challenges', challenges, CHALLENGES),
-                                  ('settings', settings, SETTINGS)):
+    for name, values, allowed in (('challenges', challenges, tasks.names()),
+                                  ('settings', settings, tasks.SETTINGS)):
         unknown = sorted(set(values) - set(allowed))
         if unknown:
             parser.error(f'--{name}: unknown {unknown}; allowed: {", ".join(allowed)}')

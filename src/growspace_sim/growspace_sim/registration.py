@@ -1,39 +1,47 @@
 """Gymnasium ids of the GrowSpace environments, registered lazily by entry-point string.
 
-Importing this module imports Gymnasium only, not the environments (nor OpenCV), so that
-``import growspace_sim`` stays cheap and the core stays importable without OpenCV.
+Every registered ``Task`` (``core.task``) gets ``GrowSpace/<env_name>[Continuous]-<Setting>-v0``
+for each of its settings, plus its ``extra_envs``. Importing this module imports Gymnasium and
+the numpy core only, not the environments (nor OpenCV), so that ``import growspace_sim`` stays
+cheap and the core stays importable without OpenCV.
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-CHALLENGE_IDS = {'control': 'Control', 'find_plant': 'FindPlant', 'fairness': 'Fairness',
-                 'shape': 'Shape'}
+from growspace_sim.core import task as tasks
+
+ENTRY_POINT = 'growspace_sim.envs:GrowSpaceEnv'
 
 
 def env_id(challenge: str, setting: str, continuous: bool = False) -> str:
-    """The registered id, e.g. ``GrowSpace/FindPlant-Hard-v0``."""
+    """The registered id, e.g. ``GrowSpace/FindPlant-Hard-v0``.
+
+    Raises:
+        ValueError: if ``challenge`` names no registered task.
+    """
     suffix = 'Continuous' if continuous else ''
-    return f'GrowSpace/{CHALLENGE_IDS[challenge]}{suffix}-{setting.capitalize()}-v0'
+    return f'GrowSpace/{tasks.get(challenge).env_name}{suffix}-{setting.capitalize()}-v0'
 
 
 def register_envs() -> list[str]:
-    """Register every challenge x setting (discrete and continuous) with Gymnasium; idempotent.
+    """Register every task x setting (discrete and continuous) with Gymnasium; idempotent.
+
+    Call it again after registering a task of your own to get its ids.
 
     Returns:
         All GrowSpace ids.
     """
-    specs = {'GrowSpace/Shape-AllDigits-v0': ('growspace_sim.envs:GrowSpaceEnv',
-                                              {'challenge': 'shape', 'digits': tuple(range(10))}),
-             'GrowSpace/Shape-Curriculum-v0': ('growspace_sim.envs:make_curriculum', {})}
-    for challenge in CHALLENGE_IDS:
-        for setting in ('easy', 'hard'):
+    specs = {}
+    for task in tasks.all_tasks():
+        for setting in task.settings:
             for continuous in (False, True):
-                specs[env_id(challenge, setting, continuous)] = (
-                    'growspace_sim.envs:GrowSpaceEnv',
-                    {'challenge': challenge, 'setting': setting, 'continuous': continuous})
+                specs[env_id(task.name, setting, continuous)] = (
+                    ENTRY_POINT,
+                    {'challenge': task.name, 'setting': setting, 'continuous': continuous})
+        specs.update(task.extra_envs)
     for name, (entry_point, kwargs) in specs.items():
         if name not in gym.registry:
-            gym.register(name, entry_point=entry_point, kwargs=kwargs)
+            gym.register(name, entry_point=entry_point, kwargs=dict(kwargs))
     return sorted(specs)

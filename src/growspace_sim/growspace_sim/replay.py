@@ -478,14 +478,12 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
                                   f'{episode.reset_id}) has no recorded seed, so it cannot be '
                                   f're-simulated.')
             if sim is None or sim.cfg != episode.config:
-                rng = sim.rng if sim is not None else None
                 try:
-                    sim = Simulation(episode.config, source)
+                    sim = Simulation(episode.config, source) if sim is None \
+                        else sim.with_config(episode.config)
                 except FileNotFoundError as e:
                     raise ReplayError(f'{bag.path}: episode {episode.index} needs the shape '
                                       f'digits of source {source!r}: {e}') from e
-                if rng is not None:
-                    sim.rng = rng
                 fingerprint = meta.get('digit_fingerprint', '')
                 current = recording.digit_fingerprint(sim)
                 if fingerprint and current and fingerprint != current:

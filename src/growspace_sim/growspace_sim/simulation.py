@@ -20,6 +20,9 @@ from growspace_sim.render import Renderer
 class Simulation:
     """A chamber, its renderer and its episode generator.
 
+    The random stream is the simulation's own: ``reset(seed=...)`` restarts it, ``reset()``
+    continues it, and ``with_config`` carries it over to another configuration.
+
     Args:
         cfg: the validated configuration.
         digit_source: where shape targets come from (``growspace_sim.digits.load_digits``).
@@ -27,14 +30,36 @@ class Simulation:
 
     def __init__(self, cfg: SimConfig, digit_source: str = 'auto') -> None:
         self.cfg = cfg
+        self.digit_source = digit_source
         self.chamber = Chamber(cfg)
         self.renderer = Renderer(cfg)
-        self.digit_set = digit_data.load_digits(digit_source) if cfg.challenge == 'shape' else None
+        self.digit_set = None if cfg.task.digits is None else digit_data.load_digits(digit_source)
         self.target_digits = cfg.target_digits
         self.digit: int | None = None
-        self.rng = np.random.default_rng()
-        self.seed: int | None = None
-        self.episode = 0
+        self._rng = np.random.default_rng()
+        self._seed: int | None = None
+        self._episode = 0
+
+    @property
+    def seed(self) -> int | None:
+        """The latest seed the stream was restarted from (None: never seeded)."""
+        return self._seed
+
+    @property
+    def episode(self) -> int:
+        """Episodes begun so far (continued across ``with_config``)."""
+        return self._episode
+
+    def with_config(self, cfg: SimConfig) -> Simulation:
+        """A simulation of ``cfg`` that continues this one's random stream, seed and episode
+        count, so an unseeded reset after a change of challenge stays reproducible.
+
+        Raises:
+            ValueError, FileNotFoundError: as the constructor.
+        """
+        sim = Simulation(cfg, self.digit_source)
+        sim._rng, sim._seed, sim._episode = self._rng, self._seed, self._episode
+        return sim
 
     def set_target_digits(self, digits: Sequence[int]) -> None:
         """Draw shape targets from these digits from the next reset on (curriculum learning).
@@ -56,16 +81,16 @@ class Simulation:
             rng: use this generator instead (the Gymnasium env passes its ``np_random``).
         """
         if rng is not None:
-            self.rng = rng
+            self._rng = rng
         elif seed is not None:
-            self.rng = np.random.default_rng(seed)
-        self.seed = seed if seed is not None else self.seed
+            self._rng = np.random.default_rng(seed)
+        self._seed = seed if seed is not None else self._seed
         image = None
         if self.digit_set is not None:
-            image, self.digit = self.digit_set.sample(self.rng, self.target_digits)
-        self.chamber.reset(self.rng, image)
+            image, self.digit = self.digit_set.sample(self._rng, self.target_digits)
+        self.chamber.reset(self._rng, image)
         self.renderer.reset(self.chamber)
-        self.episode += 1
+        self._episode += 1
         return self.chamber.current_reward()
 
     def apply_discrete(self, action: int) -> None:

@@ -1,8 +1,11 @@
 """The simulation core: pure numpy, no ROS, no OpenCV, no middleware."""
 
 from growspace_sim.core.chamber import Chamber, StepOutcome
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS, Light
+from growspace_sim.core.state import ChamberState
+from growspace_sim.core.task import SETTINGS, Layout, Task, register
+from growspace_sim.core import tasks  # noqa: F401,I100  (registers the built-in challenges)
 
-__all__ = ['BEAM_ACTIONS', 'CHALLENGES', 'Chamber', 'Light', 'SETTINGS', 'SPOT_ACTIONS',
-           'SimConfig', 'StepOutcome']
+__all__ = ['BEAM_ACTIONS', 'Chamber', 'ChamberState', 'Layout', 'Light', 'SETTINGS',
+           'SPOT_ACTIONS', 'SimConfig', 'StepOutcome', 'Task', 'register']

@@ -12,9 +12,14 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
-SETTINGS = ('easy', 'hard')
+from growspace_sim.core import task as tasks
+from growspace_sim.core.task import SETTINGS, Task  # noqa: F401  (SETTINGS: re-exported)
+
 REFERENCE_IMAGE_SIZE = 84  # px; the paper states light displacement in pixels of this image
+# Bounds that keep an episode within a small machine (2 cores, 24 GB): memory grows linearly with
+# the node slots (about 300 B each, chamber and renderer), the photons and the canopy columns.
+MAX_NODES = 2_000_000  # node slots: max_branching x episode_length; about 600 MB at most
+MIN_THICKNESS = 0.001  # fraction of the width: at most 1,000 canopy columns
 
 
 @dataclass(frozen=True)
@@ -53,17 +58,26 @@ class SimConfig:
     shape_success: float = 0.5  # Jaccard index at which the shape counts as reached
 
     def __post_init__(self) -> None:
-        _check_choice('challenge', self.challenge, CHALLENGES)
-        _check_choice('setting', self.setting, SETTINGS)
+        if not isinstance(self.challenge, str):
+            raise ValueError(f'challenge must be one of {tasks.names()}, got {self.challenge!r}.')
+        task = tasks.get(self.challenge)
+        _check_choice('setting', self.setting, task.settings)
         for name in ('chamber_width', 'chamber_height'):
             _check_range(name, getattr(self, name), 0.01, 100.0)
         if self.image_size != 0:
             _check_range('image_size', self.image_size, 8, 1024, integer=True)
-        _check_range('episode_length', self.episode_length, 1, 1_000_000, integer=True)
+        _check_range('episode_length', self.episode_length, 1, 100_000, integer=True)
         _check_range('light_density', self.light_density, 1, 100_000, integer=True)
-        _check_range('max_branching', self.max_branching, 1, 1000, integer=True)
+        _check_range('max_branching', self.max_branching, 1, 100, integer=True)
+        if self.max_branching * self.episode_length > MAX_NODES:
+            raise ValueError(
+                f'max_branching x episode_length ({self.max_branching} x {self.episode_length}'
+                f' = {self.max_branching * self.episode_length}) must be in [1, {MAX_NODES}]: '
+                f'the chamber keeps room for every node an episode can grow.')
+        # The canopy has one column per branch thickness: a floor keeps it small.
+        _check_range('branch_thickness', self.branch_thickness, MIN_THICKNESS, 1.0)
         for name in ('photon_min_height', 'first_branch_height', 'branch_length',
-                     'branch_thickness', 'radius_of_influence', 'kill_distance', 'light_width',
+                     'radius_of_influence', 'kill_distance', 'light_width',
                      'light_width_min', 'light_width_max', 'spot_radius', 'spot_radius_min',
                      'spot_radius_max', 'target_radius', 'shape_success'):
             _check_range(name, getattr(self, name), 0.0, 1.0, low_open=True)
@@ -84,12 +98,11 @@ class SimConfig:
                 f'first_branch_height ({self.first_branch_height} of the width) must end below '
                 f'the chamber top ({self.chamber_height} m).')
         _check_range('n_plants', self.n_plants, 1, 16, integer=True)
-        if self.challenge == 'fairness' and self.n_plants < 2:
-            raise ValueError(f'n_plants must be at least 2 for fairness, got {self.n_plants}.')
         if not isinstance(self.digits, tuple) or not all(
                 isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= 9
                 for d in self.digits):
             raise ValueError(f'digits must be a tuple of ints in 0..9, got {self.digits!r}.')
+        task.validate(self)
 
     @classmethod
     def from_dict(cls, values: dict) -> SimConfig:
@@ -113,25 +126,29 @@ class SimConfig:
 
     # Derived quantities live in properties so they can never drift from their source.
     @property
+    def task(self) -> Task:
+        """The challenge's ``Task``: what differs between challenges."""
+        return tasks.get(self.challenge)
+
+    @property
     def uses_spotlight(self) -> bool:
-        return self.challenge == 'shape'
+        return self.task.spotlight
 
     @property
     def plant_count(self) -> int:
-        return self.n_plants if self.challenge == 'fairness' else 1
+        return self.task.plant_count(self)
 
     @property
     def resolution(self) -> int:
         """Observation side in pixels."""
-        if self.image_size:
-            return self.image_size
-        return 28 if self.challenge == 'shape' else REFERENCE_IMAGE_SIZE
+        return self.image_size or self.task.resolution
 
     @property
     def target_digits(self) -> tuple[int, ...]:
-        if self.digits:
+        """The digits shape targets are drawn from; () for a task with a point target."""
+        if self.digits or self.task.digits is None:
             return self.digits
-        return (3,) if self.setting == 'easy' else (0,)
+        return self.task.digits[self.setting]
 
     @property
     def branch_length_m(self) -> float:
@@ -144,6 +161,13 @@ class SimConfig:
     def width_m(self, fraction: float) -> float:
         """A fraction of the chamber width, in metres."""
         return fraction * self.chamber_width
+
+
+def __getattr__(name: str) -> tuple[str, ...]:
+    """``CHALLENGES``: the registered challenge names when read (``core.task.names()``)."""
+    if name == 'CHALLENGES':
+        return tasks.names()
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 
 
 def _check_choice(name: str, value: object, allowed: tuple[str, ...]) -> None:

@@ -64,10 +64,10 @@ class PolicyAgent:
 
 def case_name(env_id: str) -> str:
     """``GrowSpace/FindPlant-Hard-v0`` -> ``find_plant/hard``; shape digit sets keep their name."""
-    from growspace_sim.registration import CHALLENGE_IDS  # noqa: PLC0415
+    from growspace_sim.core import task as tasks  # noqa: PLC0415
     name = env_id.split('/')[-1].rsplit('-', 1)[0]
     challenge, _, setting = name.partition('-')
-    by_title = {title: key for key, title in CHALLENGE_IDS.items()}
+    by_title = {task.env_name: task.name for task in tasks.all_tasks()}
     return f'{by_title.get(challenge, challenge.lower())}/{setting.lower()}'
 
 

@@ -248,10 +248,8 @@ class ChamberNode:
     def _reset(self, seed: int | None, cfg: SimConfig, reset_id: int) -> None:
         """Begin an episode; raises ValueError before changing anything if ``cfg`` is bad."""
         if cfg != self.cfg:
-            sim = Simulation(cfg, self.digit_source)
             # Without a seed the random stream continues, so the episode stays reproducible.
-            sim.rng, sim.seed, sim.episode = self.sim.rng, self.sim.seed, self.sim.episode
-            self.sim, self.cfg = sim, cfg
+            self.sim, self.cfg = self.sim.with_config(cfg), cfg
             if self.on_reconfigure is not None:
                 self.on_reconfigure(cfg)
         self.pending_cfg = None

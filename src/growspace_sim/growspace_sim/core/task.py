@@ -1,0 +1,124 @@
+"""What makes a challenge: one ``Task`` object per challenge, and the registry that names them.
+
+A challenge differs from another only in what a ``Task`` holds: where plants, target and light
+start (``layout``), the light's kind, the observation size, the reward and success (``score``),
+how many plants grow, its shape targets, its oracle and its Gymnasium ids. Everything else (SCA
+growth, shading, light actions, rendering, the node) is shared. ``SimConfig.challenge`` names a
+registered task; adding a challenge is one module that builds a ``Task`` and calls ``register``
+(``docs/architecture.md`` has an example). The built-in challenges live in ``core/tasks/``.
+
+This module imports numpy only: a task is plain data and functions of numpy arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from growspace_sim.core.chamber import Chamber
+    from growspace_sim.core.config import SimConfig
+    from growspace_sim.core.state import ChamberState
+
+SETTINGS = ('easy', 'hard')
+
+Score = tuple[float, np.ndarray, bool]  # reward, (n_plants,) float64 per-plant reward, success
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The procedurally generated start of an episode, in metres."""
+
+    stem_x: tuple[float, ...]  # m, one root per plant on the floor
+    target: complex | None  # m, x + iz; None when the target is a shape (``Task.digits``)
+    light_x: float  # m, initial light centre
+    light_z: float = 0.0  # m, initial spotlight centre height (unused by a beam)
+
+
+class Oracle(Protocol):
+    """A privileged policy: reads the chamber, returns a discrete action index."""
+
+    def act(self, chamber: Chamber) -> int: ...
+
+
+@dataclass(frozen=True, eq=False)  # a task is itself: compared and hashed by identity
+class Task:
+    """One challenge: what differs from the others. Build one per module and ``register`` it.
+
+    Functions get the validated config and, where they draw, the episode's generator; they must
+    draw in a fixed order so that an episode is a function of its seed.
+    """
+
+    name: str  # the value of SimConfig.challenge, e.g. 'find_plant'
+    env_name: str  # the Gymnasium id part: GrowSpace/<env_name>[Continuous]-<Setting>-v0
+    layout: Callable[[SimConfig, np.random.Generator], Layout]  # the start of an episode
+    score: Callable[[ChamberState, SimConfig], Score]  # the reward of a state
+    spotlight: bool = False  # True: circular spotlight (x, z, radius); False: vertical beam
+    resolution: int = 84  # px, the observation side when SimConfig.image_size is 0
+    multi_plant: bool = False  # True: SimConfig.n_plants plants grow; False: one
+    digits: Mapping[str, tuple[int, ...]] | None = None  # setting -> digits; None: point target
+    oracle: Callable[[], Oracle] | None = None  # a fresh oracle (it may keep state)
+    settings: tuple[str, ...] = SETTINGS
+    # More Gymnasium ids: id -> (entry point, kwargs), e.g. the shape curriculum.
+    extra_envs: Mapping[str, tuple[str, Mapping[str, Any]]] = field(default_factory=dict)
+
+    def plant_count(self, cfg: SimConfig) -> int:
+        """Plants that grow in this challenge."""
+        return cfg.n_plants if self.multi_plant else 1
+
+    def validate(self, cfg: SimConfig) -> None:
+        """Check the config fields this challenge constrains (SimConfig checks the setting).
+
+        Raises:
+            ValueError: naming the field, the value and what is allowed.
+        """
+        if self.multi_plant and cfg.n_plants < 2:
+            raise ValueError(f'n_plants must be at least 2 for {self.name}, got {cfg.n_plants}.')
+
+
+_REGISTRY: dict[str, Task] = {}
+
+
+def register(task: Task) -> Task:
+    """Make a task available as ``SimConfig(challenge=task.name)``; returns it.
+
+    Raises:
+        ValueError: if another task already has this name or Gymnasium name.
+    """
+    for other in _REGISTRY.values():
+        if other is task:
+            return task
+        if task.name == other.name or task.env_name == other.env_name:
+            raise ValueError(f'task name {task.name!r} / env_name {task.env_name!r} is taken by '
+                             f'{other.name!r}.')
+    _REGISTRY[task.name] = task
+    return task
+
+
+def unregister(name: str) -> None:
+    """Forget a task (tests that define their own); unknown names are ignored."""
+    _REGISTRY.pop(name, None)
+
+
+def get(name: str) -> Task:
+    """The registered task called ``name``.
+
+    Raises:
+        ValueError: naming the value and the registered names.
+    """
+    task = _REGISTRY.get(name)
+    if task is None:
+        raise ValueError(f'challenge must be one of {names()}, got {name!r}.')
+    return task
+
+
+def names() -> tuple[str, ...]:
+    """The registered challenge names, in registration order."""
+    return tuple(_REGISTRY)
+
+
+def all_tasks() -> tuple[Task, ...]:
+    """The registered tasks, in registration order."""
+    return tuple(_REGISTRY.values())
