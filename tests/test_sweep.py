@@ -103,7 +103,7 @@ def test_failing_trial_is_reported_with_its_error_and_the_others_finish(
 
 
 def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path, local_ray):
-    n = 6
+    n = 8
     spec = _write_spec(tmp_path / 'resume.yaml', [
         {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': n}],
         episodes=10)
