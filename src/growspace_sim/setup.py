@@ -30,6 +30,7 @@ setup(
             'growspace-eval = growspace_sim.evaluate:main',
             'growspace-train = growspace_sim.learn.train:main',
             'growspace-compare = growspace_sim.learn.evaluate_policies:main',
+            'growspace-sweep = growspace_sim.sweep:main',
             'growspace-bench = growspace_sim.bench:main',
             'growspace-demo = growspace_sim.demo:main',
             'growspace-record = growspace_sim.recorder_cli:main',

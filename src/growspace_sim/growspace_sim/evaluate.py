@@ -20,10 +20,11 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents import OracleAgent, RandomAgent, run_episode
+from growspace_sim.agents import Agent, OracleAgent, RandomAgent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.registration import env_id
 
+AGENTS = ('random', 'oracle')
 COLUMNS = ('challenge', 'setting', 'episodes', 'random_mean', 'random_se', 'oracle_mean',
            'oracle_se', 'oracle_success')
 
@@ -40,22 +41,64 @@ class Row:
     oracle_success: float  # fraction of oracle episodes whose last step reached the goal
 
 
+@dataclass(frozen=True)
+class Episodes:
+    """What one agent scored on a run of seeded episodes."""
+
+    rewards: np.ndarray  # (episodes, steps) float64, reward of every step
+    success: np.ndarray  # (episodes,) bool, the last step's info['success']
+
+    @property
+    def returns(self) -> np.ndarray:
+        """Undiscounted return of every episode, shape (episodes,)."""
+        return self.rewards.sum(axis=1)
+
+
+def make_agent(name: str, env: gym.Env, seed: int) -> Agent:
+    """A reference agent by name: ``random`` (actions seeded with ``seed``) or ``oracle``."""
+    if name == 'random':
+        return RandomAgent(env.action_space, seed)
+    if name == 'oracle':
+        return OracleAgent()
+    raise ValueError(f'agent must be one of {", ".join(AGENTS)}, got {name!r}.')
+
+
+def play_agent(env_name: str, agent: str, episodes: int, seed: int = 0,
+               agent_seed: int | None = None, env_kwargs: dict | None = None) -> Episodes:
+    """Play ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) with a reference agent.
+
+    Used by ``growspace-eval`` and by every evaluation trial of ``growspace-sweep``.
+
+    Args:
+        env_name: A registered id, e.g. ``GrowSpace/Control-Easy-v0``.
+        agent: ``random`` or ``oracle``.
+        episodes: Number of episodes.
+        seed: Seed of the first episode.
+        agent_seed: Seed of the random agent's actions; default ``seed``.
+        env_kwargs: Keyword overrides for ``gymnasium.make`` (``SimConfig`` fields, ...).
+
+    Returns:
+        Per-step rewards and per-episode success.
+    """
+    env = gym.make(env_name, **(env_kwargs or {}))
+    try:
+        player = make_agent(agent, env, seed if agent_seed is None else agent_seed)
+        rewards, infos = play_episodes(env, player, range(seed, seed + episodes))
+    finally:
+        env.close()
+    return Episodes(rewards, np.array([bool(i.get('success', False)) for i in infos]))
+
+
 def evaluate(challenge: str, setting: str, episodes: int, seed: int = 0) -> Row:
     """Play ``episodes`` seeded episodes with each agent on the discrete env."""
-    env = gym.make(env_id(challenge, setting))
-    seeds = [seed + i for i in range(episodes)]
-    random_agent = RandomAgent(env.action_space, seed)
-    random_returns = [run_episode(env, random_agent, s)[0] for s in seeds]
-    oracle = OracleAgent()
-    oracle_runs = [run_episode(env, oracle, s) for s in seeds]
-    env.close()
-    oracle_returns = [r for r, _ in oracle_runs]
-    success = float(np.mean([info['success'] for _, info in oracle_runs]))
-    return Row(challenge, setting, episodes, *_mean_se(random_returns),
-               *_mean_se(oracle_returns), success)
+    name = env_id(challenge, setting)
+    random_runs = play_agent(name, 'random', episodes, seed)
+    oracle_runs = play_agent(name, 'oracle', episodes, seed)
+    return Row(challenge, setting, episodes, *_mean_se(random_runs.returns),
+               *_mean_se(oracle_runs.returns), float(oracle_runs.success.mean()))
 
 
-def _mean_se(values: list[float]) -> tuple[float, float]:
+def _mean_se(values: np.ndarray) -> tuple[float, float]:
     array = np.asarray(values, np.float64)
     se = array.std(ddof=1) / math.sqrt(array.size) if array.size > 1 else float('nan')
     return float(array.mean()), float(se)

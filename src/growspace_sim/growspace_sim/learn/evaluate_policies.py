@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents import OracleAgent, RandomAgent
+from growspace_sim.agents import OracleAgent, RandomAgent, play_episodes
 
 EVAL_ENV = {'GrowSpace/Shape-Curriculum-v0': 'GrowSpace/Shape-AllDigits-v0'}
 COLUMNS = ('case', 'env', 'agent', 'runs', 'episodes', 'steps', 'mean', 'se')
@@ -73,16 +73,7 @@ def case_name(env_id: str) -> str:
 
 def play(env: gym.Env, agent, seeds: list[int]) -> np.ndarray:
     """Per-step rewards, shape (episodes, steps) (zero-padded past an early termination)."""
-    rows = []
-    for seed in seeds:
-        observation, rewards, done = env.reset(seed=seed)[0], [], False
-        while not done:
-            observation, reward, terminated, truncated, _ = env.step(agent.act(observation, env))
-            rewards.append(float(reward))
-            done = terminated or truncated
-        rows.append(rewards)
-    width = max(len(r) for r in rows)
-    return np.array([r + [0.0] * (width - len(r)) for r in rows])
+    return play_episodes(env, agent, seeds)[0]
 
 
 def evaluate_env(env_id: str, runs: list[str], episodes: int, seed: int = 10_000,
@@ -92,10 +83,11 @@ def evaluate_env(env_id: str, runs: list[str], episodes: int, seed: int = 10_000
     Returns ``{label: {'rewards': (n, 50) array per run, 'steps': [...]}}``; random and
     oracle have one entry each.
     """
-    import torch  # noqa: PLC0415
+    if runs:  # random and oracle alone need no torch
+        import torch  # noqa: PLC0415
 
-    from growspace_sim.learn.train import load_model  # noqa: PLC0415
-    torch.set_num_threads(1)
+        from growspace_sim.learn.train import load_model  # noqa: PLC0415
+        torch.set_num_threads(1)
     env = gym.make(env_id)
     seeds = list(range(seed, seed + episodes))
     results: dict[str, dict] = defaultdict(lambda: {'rewards': [], 'steps': []})

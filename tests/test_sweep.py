@@ -1,0 +1,190 @@
+"""growspace-sweep: experiments as Ray Tune trials on a local Ray bound to 127.0.0.1.
+
+Needs ray[tune] (requirements-sweep.txt); skipped without it. Evaluation trials only (random
+and oracle agents), so no torch. One local Ray instance with 2 CPUs serves the in-process
+sweeps; the interrupted sweep runs in a child process that is killed with SIGKILL.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import child_env
+
+from growspace_sim import evaluate, sweep
+
+# Not imported here: sweep.connect() must set Ray's environment before ray's first import.
+if importlib.util.find_spec('ray') is None or importlib.util.find_spec('pandas') is None:
+    pytest.skip('ray[tune] is not installed (requirements-sweep.txt)', allow_module_level=True)
+
+
+@pytest.fixture(scope='module')
+def local_ray():
+    """One local Ray instance (2 CPUs) for the module, started the way growspace-sweep does."""
+    with pytest.MonkeyPatch.context() as patch:
+        for name in ('RAY_ADDRESS', 'RAY_USAGE_STATS_ENABLED',
+                     'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER'):
+            patch.delenv(name, raising=False)
+        sweep.connect(None, workers=2)
+        import ray  # noqa: PLC0415
+        yield ray
+        ray.shutdown()
+
+
+def _write_spec(path: Path, runs: list[dict], episodes: int = 4, eval_seed: int = 0) -> Path:
+    path.write_text(yaml.safe_dump({'name': path.stem, 'episodes': episodes,
+                                    'eval_seed': eval_seed, 'runs': runs}))
+    return path
+
+
+def _read_csv(path: Path) -> list[dict]:
+    with open(path, newline='') as f:
+        return list(csv.DictReader(f))
+
+
+def test_evaluation_sweep_on_two_workers_equals_sequential_growspace_eval(tmp_path, local_ray):
+    nodes = local_ray.nodes()
+    assert [n['NodeManagerAddress'] for n in nodes] == ['127.0.0.1']
+    assert local_ray.cluster_resources()['CPU'] == 2
+    spec = _write_spec(tmp_path / 'equal.yaml', [
+        {'agents': ['random', 'oracle'],
+         'envs': ['GrowSpace/Control-Hard-v0', 'GrowSpace/Fairness-Easy-v0']}],
+        episodes=5, eval_seed=3)
+
+    assert sweep.main([str(spec), '--out', str(tmp_path / 'out'), '--workers', '2',
+                       '--quiet']) == 0
+
+    assert evaluate.main(['--episodes', '5', '--seed', '3', '--challenges', 'control,fairness',
+                          '--settings', 'hard,easy', '--csv', str(tmp_path / 'eval.csv')]) == 0
+    expected = {}
+    for row in _read_csv(tmp_path / 'eval.csv'):
+        env = f'GrowSpace/{"Control" if row["challenge"] == "control" else "Fairness"}-' \
+              f'{row["setting"].capitalize()}-v0'
+        for agent in ('random', 'oracle'):
+            expected[env, agent] = (float(row[f'{agent}_mean']), float(row[f'{agent}_se']))
+    swept = {(r['env'], r['agent']): (float(r['mean']), float(r['se']))
+             for r in _read_csv(tmp_path / 'out' / 'results.csv')}
+    assert len(swept) == 4
+    assert swept == {k: v for k, v in expected.items() if k in swept}
+    trials = _read_csv(tmp_path / 'out' / 'trials.csv')
+    assert {t['status'] for t in trials} == {'ok'}
+    assert (tmp_path / 'out' / 'rewards.png').stat().st_size > 0
+    per_episode = _read_csv(tmp_path / 'out' / 'trials' / 'oracle-control-hard-s0'
+                            / 'evaluation.csv')
+    assert [int(r['episode_seed']) for r in per_episode] == [3, 4, 5, 6, 7]
+
+
+def test_failing_trial_is_reported_with_its_error_and_the_others_finish(
+        tmp_path, local_ray, capsys):
+    spec = _write_spec(tmp_path / 'failing.yaml', [
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': 2},
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'label': 'dense',
+         'env_kwargs': {'light_density': 0}}])
+
+    assert sweep.main([str(spec), '--out', str(tmp_path / 'out'), '--workers', '2',
+                       '--quiet', '--no-plots']) == 1
+
+    trials = {t['key']: t for t in _read_csv(tmp_path / 'out' / 'trials.csv')}
+    assert [t['status'] for t in trials.values()] == ['ok', 'ok', 'error']
+    error = trials['dense-control-easy-s0']['error']
+    assert error.startswith('ValueError: light_density must be in [1, 100000], got 0')
+    assert f'trial dense-control-easy-s0 failed: {error}' in capsys.readouterr().err
+    assert [(r['agent'], r['episodes']) for r in _read_csv(tmp_path / 'out' / 'results.csv')] \
+        == [('random', '4')]
+
+
+def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path, local_ray):
+    n = 8
+    spec = _write_spec(tmp_path / 'resume.yaml', [
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': n}],
+        episodes=10)
+    out = tmp_path / 'out'
+    env = child_env()
+    env['TUNE_GLOBAL_CHECKPOINT_S'] = '0'  # Tune saves its state at every step
+    env.pop('RAY_ADDRESS', None)
+    child = subprocess.Popen(
+        [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
+         '--workers', '1', '--quiet', '--no-plots'],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _wait_for(lambda: _finished(out), 3, child)
+    child.send_signal(signal.SIGKILL)
+    child.wait(timeout=30)
+    finished = _finished(out)  # one more may have finished before the signal landed
+    assert 3 <= len(finished) < n, 'the sweep was not killed mid-way'
+    # One trial at a time: a trial starts only after Tune saved the previous one as finished,
+    # so every finished trial but the newest one is on record.
+    newest = max(finished, key=lambda k: finished[k]['started'])
+    on_record = {k: v for k, v in finished.items() if k != newest}
+
+    assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
+                       '--no-plots']) == 0
+
+    after = _finished(out)
+    assert len(after) == n
+    for key, summary in on_record.items():
+        assert after[key] == summary, f'{key} ran again'
+    reran = [k for k in after if k not in on_record]
+    assert len(reran) >= n - len(finished)
+    for key in after:  # one execution (one reported result) per trial
+        lines = (out / 'tune' / key / 'result.json').read_text().splitlines()
+        assert len(lines) == 1, key
+    assert {t['status'] for t in _read_csv(out / 'trials.csv')} == {'ok'}
+
+
+def _finished(out: Path) -> dict[str, dict]:
+    """trial.json of every trial whose checkpoint Ray Tune has written, by trial key."""
+    found = {}
+    for path in (out / 'tune').glob('*/checkpoint_*/trial.json'):
+        try:
+            found[path.parent.parent.name] = json.loads(path.read_text())
+        except ValueError:  # being written
+            continue
+    return found
+
+
+def _wait_for(check, count: int, child: subprocess.Popen, timeout: float = 180.0) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = check()
+        if len(found) >= count:
+            return found
+        if child.poll() is not None:
+            pytest.fail(f'the sweep exited early ({child.returncode}): '
+                        f'{child.stderr.read().decode()[-2000:]}')
+        time.sleep(0.1)
+    child.kill()
+    pytest.fail(f'fewer than {count} trials finished in {timeout} s')
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'colour': 'red'}, 'spec: unknown key(s) colour; allowed: name, episodes'),
+    ({'episodes': 1}, 'episodes must be an integer >= 2; got 1'),
+    ({'runs': [{'agents': ['random'], 'envs': ['GrowSpace/Nope-v0']}]},
+     "runs[0].envs: unknown 'GrowSpace/Nope-v0'; allowed: GrowSpace/Control-Easy-v0"),
+    ({'runs': [{'agents': ['greedy'], 'envs': ['GrowSpace/Control-Easy-v0']}]},
+     "runs[0].agents: unknown 'greedy'; allowed: random, oracle, ppo"),
+    ({'runs': [{'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': -1}]},
+     'runs[0].seeds must be an integer >= 1; got -1'),
+    ({'runs': [{'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'steps': 10}]},
+     'runs[0]: steps only apply to learners'),
+    ({'runs': [{'agents': ['oracle'], 'envs': ['GrowSpace/ControlContinuous-Easy-v0']}]},
+     'runs[0]: the oracle acts through discrete actions'),
+    ({'runs': [{'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0']},
+               {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': [0]}]},
+     'runs[1]: trial random-control-easy-s0 is also in runs[0]'),
+])
+def test_bad_spec_names_the_field_the_value_and_what_is_allowed(change, message):
+    data = {'name': 'bad', 'runs': [{'agents': ['random'],
+                                     'envs': ['GrowSpace/Control-Easy-v0']}], **change}
+    with pytest.raises(sweep.SpecError) as error:
+        sweep.parse_spec(data)
+    assert message in str(error.value)
