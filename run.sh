@@ -78,19 +78,22 @@ sandboxed() {
   exec "$@"
 }
 
+# One venv for every subcommand (a different set would rebuild it): Ray is in for the sweeps.
+MAIN=(.venv . python3 requirements.txt requirements-sweep.txt)
+
 cmd=${1:-help}
 [ $# -gt 0 ] && shift
 case "$cmd" in
-  build) setup .venv . python3 requirements.txt ;;
-  demo) setup .venv . python3 requirements.txt
+  build) setup "${MAIN[@]}" ;;
+  demo) setup "${MAIN[@]}"
         sandboxed .venv/bin/python -m growspace_sim.demo "$@" ;;
-  test) setup .venv . python3 requirements.txt
+  test) setup "${MAIN[@]}"
         sandboxed .venv/bin/python -m pytest -q tests "$@" ;;
-  bench) setup .venv . python3 requirements.txt
+  bench) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.bench "$@" ;;
-  eval) setup .venv . python3 requirements.txt
+  eval) setup "${MAIN[@]}"
         exec .venv/bin/python -m growspace_sim.evaluate "$@" ;;
-  sweep) setup .venv . python3 requirements.txt requirements-sweep.txt
+  sweep) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)
     if ! command -v python3.12 > /dev/null; then
@@ -101,6 +104,6 @@ case "$cmd" in
     setup .venv-compat .venv-compat/ws python3.12 requirements.txt requirements-compat.txt
     sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
       tests/test_core.py tests/test_envs.py tests/test_digits.py tests/test_agents.py \
-      tests/test_ros_node.py tests/test_ros_bridge.py ;;
+      tests/test_ros_node.py tests/test_bridge.py ;;
   *) sed -n '2,9p' "$0"; exit 2 ;;
 esac

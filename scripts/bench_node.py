@@ -1,15 +1,17 @@
 #!/usr/bin/env python3
-"""Lockstep round trip through sim_node over loopback DDS vs the in-process env, same run.
+"""Lockstep round trip through the rclpy sim_node vs the in-process env, same run.
 
-Method: control easy, discrete random actions (seeded), 50-step episodes. The node runs in a
-child process (lockstep, on a random domain, loopback only); the client sends a LightCommand
+Method: control easy, discrete random actions (seeded), 50-step episodes. The node is the
+installed ``sim_node`` in a child process (lockstep, random domain, loopback only); the client
+(an ``RclpyTransport``, as the bridge uses) sends a LightCommand
 and waits for both its StepResult and its Image before the next one; episodes end with a reset
 that is waited for too. The in-process figure is ``gymnasium.make('GrowSpace/Control-Easy-v0')``
 stepping the same way (obs + reward). Steps/s counts steps only, reset time included. Each
-figure is the best of ``--repeats`` runs of ``--episodes`` episodes.
+figure is the best of ``--repeats`` runs of ``--episodes`` episodes; CPU per step of the node
+(from /proc) and of the client (process time) is over all repeats.
 
-Usage (from the workspace root):
-    PYTHONPATH=src/growspace_sim python scripts/bench_node.py [--episodes 20] [--repeats 3]
+Usage (workspace sourced, e.g. inside ``./run.sh`` or after ``source install/setup.bash``):
+    python scripts/bench_node.py [--episodes 20] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -46,66 +48,88 @@ def in_process(episodes: int, seed: int) -> float:
 
 
 class Client:
-    def __init__(self, ctx, qos_cmd, qos_obs) -> None:
+    """Lockstep client: waits for the StepResult and the Image of every request."""
+
+    def __init__(self) -> None:
+        from growspace_sim import convert
+        from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS
+        from growspace_sim.node.rclpy_transport import RclpyTransport
         from growspace_sim.ros import types
 
         self.types = types
-        self.cmd = ctx.create_publisher(types.LIGHT_COMMAND, 'light/command', qos_cmd)
-        self.rst = ctx.create_publisher(types.RESET_REQUEST, 'reset', qos_cmd)
-        self.res = ctx.create_subscription(types.STEP_RESULT, 'step_result', qos_obs)
-        self.img = ctx.create_subscription('sensor_msgs/msg/Image', 'camera/image_raw', qos_obs)
-        for endpoint in (self.cmd, self.rst):
-            assert endpoint.wait_for_subscribers(1, 20.0), 'node not found'
-        for endpoint in (self.res, self.img):
-            assert endpoint.wait_for_publishers(1, 20.0), 'node not found'
+        self.transport = t = RclpyTransport('bench_client', '/bench')
+        self.cmd = t.publisher(types.LIGHT_COMMAND, 'light/command', COMMAND_QOS)
+        self.rst = t.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
+        self.result: object = None
+        self.images = 0
+        t.subscribe(types.STEP_RESULT, 'step_result', OBSERVATION_QOS,
+                    lambda msg, _: setattr(self, 'result', msg))
+        t.subscribe(convert.IMAGE, 'camera/image_raw', OBSERVATION_QOS, self._image)
+        deadline = time.monotonic() + 20.0
+        topics = ('light/command', 'reset', 'step_result', 'camera/image_raw')
+        while not all(map(t.matched, topics)):
+            assert time.monotonic() < deadline, 'node not found'
+            t.spin_once(0.05)
+        end = time.monotonic() + 0.3
+        while time.monotonic() < end:
+            t.spin_once(0.05)
+        self.command = types.new(types.LIGHT_COMMAND, mode=2)
+
+    def _image(self, msg: object, _: bytes) -> None:
+        self.images += 1
 
     def _wait(self, step_id: int, reset_id: int | None) -> None:
-        got_result = got_image = False
         deadline = time.monotonic() + TIMEOUT_S
-        while not (got_result and got_image):
+        while True:
+            r = self.result
+            if r is not None and r.step_id == step_id and (
+                    reset_id is None or r.reset_id == reset_id) and self.images:
+                break  # the image is published before the result
             if time.monotonic() > deadline:
                 raise TimeoutError(f'no answer to step_id {step_id}')
-            if not got_result:
-                self.res.wait(0.5)
-                for _, msg in self.res.take():
-                    got_result |= msg.step_id == step_id and (
-                        reset_id is None or msg.reset_id == reset_id)
-            if got_result and not got_image:
-                self.img.wait(0.5)
-            # The image is published before the result; take whatever is there.
-            got_image |= bool(self.img.take()) or (got_image and got_result)
+            self.transport.spin_once(0.5)
+        self.result, self.images = None, 0
 
     def step(self, step_id: int, action: int) -> None:
-        self.cmd.publish(self.types.new(self.types.LIGHT_COMMAND, step_id=step_id, mode=2,
-                                        action=action))
+        self.command.step_id, self.command.action = step_id, action
+        self.cmd(self.command)
         self._wait(step_id, None)
 
     def reset(self, reset_id: int) -> None:
-        self.rst.publish(self.types.new(self.types.RESET_REQUEST, reset_id=reset_id))
+        self.rst(self.types.new(self.types.RESET_REQUEST, reset_id=reset_id))
         self._wait(0, reset_id)
 
 
-def over_dds(episodes: int, repeats: int, seed: int) -> list[float]:
-    from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS
-    from growspace_sim.ros import dds
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process [s] (Linux /proc)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
-    node = subprocess.Popen([sys.executable, '-m', 'growspace_sim.node.main', '--ros-args',
-                             '-r', '__ns:=/bench', '-p', f'seed:={seed}'],
-                            stderr=subprocess.DEVNULL)
+
+def over_ros(episodes: int, repeats: int, seed: int) -> tuple[list[float], float, float]:
+    """Steps/s of each repeat, and node and client CPU per step [s]."""
+    from ros_paths import sim_node_executable
+
+    node = subprocess.Popen([sim_node_executable(), '--ros-args', '-r', '__ns:=/bench',
+                             '-p', f'seed:={seed}'], stderr=subprocess.DEVNULL)
     rates = []
     try:
-        with dds.DdsContext('bench_client', '/bench') as ctx:
-            client = Client(ctx, COMMAND_QOS, OBSERVATION_QOS)
-            rng = np.random.default_rng(seed)
-            reset_id = 0
-            for _ in range(repeats):
-                start = time.perf_counter()
-                for _ in range(episodes):
-                    reset_id += 1
-                    client.reset(reset_id)
-                    for step_id in range(1, EPISODE + 1):
-                        client.step(step_id, int(rng.integers(5)))
-                rates.append(episodes * EPISODE / (time.perf_counter() - start))
+        client = Client()
+        rng = np.random.default_rng(seed)
+        reset_id = 0
+        node_cpu, client_cpu = cpu_seconds(node.pid), time.process_time()
+        for _ in range(repeats):
+            start = time.perf_counter()
+            for _ in range(episodes):
+                reset_id += 1
+                client.reset(reset_id)
+                for step_id in range(1, EPISODE + 1):
+                    client.step(step_id, int(rng.integers(5)))
+            rates.append(episodes * EPISODE / (time.perf_counter() - start))
+        steps = repeats * episodes * EPISODE
+        node_cpu = (cpu_seconds(node.pid) - node_cpu) / steps
+        client_cpu = (time.process_time() - client_cpu) / steps
+        client.transport.close()
     finally:
         node.terminate()
         try:
@@ -113,7 +137,7 @@ def over_dds(episodes: int, repeats: int, seed: int) -> list[float]:
         except subprocess.TimeoutExpired:
             node.kill()
             node.wait()
-    return rates
+    return rates, node_cpu, client_cpu
 
 
 def main() -> int:
@@ -122,19 +146,20 @@ def main() -> int:
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args()
-    os.environ.setdefault('CYCLONEDDS_URI', (ROOT / 'config' / 'cyclonedds.xml').as_uri())
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(100, 200)))
-    os.environ['GROWSPACE_TRANSPORT'] = 'dds'
+    from growspace_sim.ros import loopback
+
+    loopback.confine()
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 101)))
     local = [in_process(args.episodes, args.seed) for _ in range(args.repeats)]
-    remote = over_dds(args.episodes, args.repeats, args.seed)
+    remote, node_cpu, client_cpu = over_ros(args.episodes, args.repeats, args.seed)
     best_local, best_remote = max(local), max(remote)
     print(f'{"path":<34}{"steps/s (best)":>16}{"all runs":>30}')
     print(f'{"in-process gymnasium env":<34}{best_local:>16.0f}'
           f'{" ".join(f"{r:.0f}" for r in local):>30}')
-    print(f'{"sim_node lockstep over DDS":<34}{best_remote:>16.0f}'
+    print(f'{"sim_node lockstep over rclpy":<34}{best_remote:>16.0f}'
           f'{" ".join(f"{r:.0f}" for r in remote):>30}')
-    print(f'ratio node / in-process: {best_remote / best_local:.0%} '
-          f'(targets: >= 50% and >= 2000 steps/s)')
+    print(f'ratio node / in-process: {best_remote / best_local:.0%} (target: >= 1,500 steps/s)')
+    print(f'CPU per step: node {node_cpu * 1e6:.0f} us, client {client_cpu * 1e6:.0f} us')
     return 0
 
 
