@@ -18,5 +18,5 @@ setup(
     maintainer_email='growspace@example.com',
     description='Gymnasium bridge over the GrowSpace chamber topics.',
     license='Apache-2.0',
-    python_requires='>=3.10',
+    python_requires='>=3.11',
 )

@@ -24,7 +24,7 @@ setup(
     maintainer_email='growspace@example.com',
     description='GrowSpace plant-growth chamber simulation, ROS 2 node and Gymnasium envs.',
     license='Apache-2.0',
-    python_requires='>=3.10',
+    python_requires='>=3.11',
     entry_points={
         'console_scripts': [
             'growspace-eval = growspace_sim.evaluate:main',

@@ -149,7 +149,7 @@ def bridge_env_id(env_id: str) -> str:
     """``GrowSpace/Control-Easy-v0`` -> ``GrowSpaceROS/Control-Easy-v0``; registers those ids.
 
     Each env copy then starts its own lockstep ``sim_node`` and talks to it over ROS 2 topics
-    (``growspace_gym_bridge``; rclpy, or Cyclone DDS on loopback without ROS).
+    (``growspace_gym_bridge``, over rclpy).
     """
     import growspace_gym_bridge  # noqa: F401, PLC0415  (registers GrowSpaceROS/...)
     name = env_id.split('/', 1)[1]
