@@ -1,4 +1,4 @@
-"""Set-up: the ROS 2 wheels' CMake exports are pointed at the venv's own headers, and only there."""
+"""Set-up: the ROS 2 wheels' CMake exports point at the venv's own headers, and only there."""
 
 from __future__ import annotations
 
