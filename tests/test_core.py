@@ -13,6 +13,7 @@ from growspace_sim.core import chamber as chamber_module, light as lights
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.errors import CommandError
 from growspace_sim.core.tasks import distance_reward, jaccard
 
 from conftest import child_env
@@ -318,18 +319,20 @@ def test_continuous_actions_map_onto_the_limits():
 
 
 @pytest.mark.parametrize('action, message', [
-    (5, r'action must be an int in \[0, 4\]'), (-1, 'action must be'), (1.5, 'got 1.5'),
-    (True, 'got True')])
+    (5, r'action = 5 is not allowed; expected an int in \[0, 4\] \(left, right,'),
+    (-1, 'action = -1 '), (1.5, 'action = 1.5 '), (True, 'action = True ')])
 def test_bad_discrete_actions_are_rejected(action, message):
     cfg = SimConfig()
     light = lights.initial_light(cfg, 0.42, 0.0)
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(CommandError, match=message) as err:
         lights.apply_discrete(light, action, cfg)
+    assert (err.value.field, err.value.value) == ('action', action)
 
 
 @pytest.mark.parametrize('action, message', [
-    ([0.0], 'must have 2 values, got 1'), ([np.nan, 0.0], r'action\[0\] must be finite'),
-    ([0.0, 1.5], r'action\[1\] must be finite and in \[-1, 1\], got 1.5')])
+    ([0.0], r'continuous = \[0.0\] is not allowed; expected 2 values'),
+    ([np.nan, 0.0], r'continuous\[0\] = nan is not allowed'),
+    ([0.0, 1.5], r'continuous\[1\] = 1.5 is not allowed; expected a finite number in \[-1, 1\]')])
 def test_bad_continuous_actions_are_rejected(action, message):
     cfg = SimConfig()
     light = lights.initial_light(cfg, 0.42, 0.0)
@@ -342,7 +345,7 @@ def test_bad_continuous_actions_are_rejected(action, message):
 def test_absolute_light_commands_reject_non_finite_values():
     cfg = SimConfig()
     light = lights.initial_light(cfg, 0.42, 0.0)
-    with pytest.raises(ValueError, match='light x must be finite, got nan'):
+    with pytest.raises(CommandError, match='x = nan is not allowed; expected a finite number'):
         lights.set_absolute(light, cfg, float('nan'), 0.0, 0.2, 0.1)
 
 

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from growspace_sim.core.chamber import Chamber, StepOutcome
+from growspace_sim.core.errors import CommandError
 from growspace_sim.core import task as tasks
 from growspace_sim.core.light import Light
 from growspace_sim.ros import types
@@ -103,7 +104,7 @@ def apply_command(sim: Any, msg: Any) -> None:
     """Apply a ``LightCommand`` to a ``Simulation``'s light (not yet stepping).
 
     Raises:
-        ValueError: naming the field, its value and what is allowed, for an unknown mode, an
+        CommandError: naming the field, its value and what is allowed, for an unknown mode, an
             absolute mode that does not match the challenge's light, a non-finite coordinate,
             an action out of range or a continuous vector of the wrong size or range. The light
             is unchanged then.
@@ -131,7 +132,7 @@ def reset_args(msg: Any) -> tuple[int | None, str | None, str | None]:
     """(seed or None, challenge or None, setting or None) of a ``ResetRequest``.
 
     Raises:
-        ValueError: naming the field for an unknown challenge or setting or a seed too large.
+        CommandError: naming the field for an unknown challenge or setting or a seed too large.
     """
     challenge = msg.challenge or None
     setting = msg.setting or None
@@ -146,4 +147,4 @@ def reset_args(msg: Any) -> tuple[int | None, str | None, str | None]:
 
 
 def _reject(field: str, value: Any, allowed: str) -> None:
-    raise ValueError(f'{field} = {value!r} is not allowed; expected {allowed}.')
+    raise CommandError(field, value, allowed)

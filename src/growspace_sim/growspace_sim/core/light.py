@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.errors import CommandError
 
 BEAM_ACTIONS = ('left', 'right', 'stay', 'wider', 'narrower')
 SPOT_ACTIONS = ('left', 'right', 'up', 'down', 'bigger', 'smaller', 'stay')
@@ -59,13 +60,13 @@ def apply_discrete(light: Light, action: int, cfg: SimConfig) -> None:
     """Move or resize the light by one discrete action (BEAM_ACTIONS or SPOT_ACTIONS).
 
     Raises:
-        ValueError: if ``action`` is not an index of the light's action list.
+        CommandError: if ``action`` is not an index of the light's action list.
     """
     names = SPOT_ACTIONS if light.spot else BEAM_ACTIONS
     if isinstance(action, bool) or not isinstance(action, (int, np.integer)) \
             or not 0 <= action < len(names):
-        raise ValueError(f'action must be an int in [0, {len(names) - 1}] '
-                         f'({", ".join(names)}), got {action!r}.')
+        raise CommandError('action', action,
+                           f'an int in [0, {len(names) - 1}] ({", ".join(names)})')
     step = cfg.light_step_m
     name = names[action]
     if name == 'left':
@@ -100,18 +101,17 @@ def apply_continuous(light: Light, action: np.ndarray, cfg: SimConfig) -> None:
     dz in light steps and radius mapped onto [spot_radius_min, spot_radius_max].
 
     Raises:
-        ValueError: on a wrong length or a value that is not finite or outside [-1, 1].
+        CommandError: on a wrong length or a value that is not finite or outside [-1, 1].
     """
     size = continuous_size(light)
     values = np.asarray(action, dtype=np.float64).reshape(-1)
     if values.size != size:
-        raise ValueError(f'continuous action must have {size} values, got {values.size}.')
+        raise CommandError('continuous', values.tolist(), f'{size} values in [-1, 1]')
     finite = np.isfinite(values)
     bad = ~finite | (np.abs(np.where(finite, values, 0.0)) > 1.0)  # no NaN comparison warnings
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f'continuous action[{i}] must be finite and in [-1, 1], '
-                         f'got {float(values[i])!r}.')
+        raise CommandError(f'continuous[{i}]', float(values[i]), 'a finite number in [-1, 1]')
     step = cfg.light_step_m
     light.x += float(values[0]) * step
     if light.spot:
@@ -129,11 +129,11 @@ def set_absolute(light: Light, cfg: SimConfig, x: float, z: float, width: float,
     """Place the light at absolute coordinates (m), as an LED gantry would be commanded.
 
     Raises:
-        ValueError: naming the first coordinate that is not finite.
+        CommandError: naming the first coordinate that is not finite.
     """
     for name, value in (('x', x), ('z', z), ('width', width), ('radius', radius)):
         if not math.isfinite(value):
-            raise ValueError(f'light {name} must be finite, got {value!r}.')
+            raise CommandError(name, value, 'a finite number [m]')
     light.x, light.z, light.width, light.radius = x, z, width, radius
     clamp(light, cfg)
 

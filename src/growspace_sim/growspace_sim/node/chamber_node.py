@@ -25,6 +25,7 @@ import numpy as np
 from growspace_sim import convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.errors import CommandError
 from growspace_sim.node.interface import (
     COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, STRING, config_json,
     digit_fingerprint, growspace_metadata)
@@ -44,6 +45,12 @@ def _apply(sim: Simulation, msg: Any) -> None:
     # NaN/inf in a float32 action are rejected by apply_command; numpy's cast warning is noise.
     with np.errstate(invalid='ignore', over='ignore'):
         convert.apply_command(sim, msg)
+
+
+def _text(error: Exception) -> str:
+    """How a rejected request is reported: a ValueError's own text names field and value."""
+    return str(error) if isinstance(error, ValueError) else \
+        f'reset failed: {type(error).__name__}: {error}'
 
 
 class Recorder(Protocol):
@@ -131,23 +138,27 @@ class ChamberNode:
         self._record_input('reset', cdr)
         reset_id = int(msg.reset_id)
         error = self.request_reset(msg, reset_id)
-        if error:
-            self.log.warn(f'reset:{error.split(" ", 1)[0]}', f'reset: rejected reset_id '
-                          f'{reset_id}: {error.rstrip(".")}; the episode goes on unchanged.')
-            self._publish_result(step_id=0, reset_id=reset_id, info=f'error: {error}')
+        if error is not None:
+            key = error.field if isinstance(error, CommandError) else type(error).__name__
+            self.log.warn(f'reset:{key}', f'reset: rejected reset_id {reset_id}: '
+                          f'{_text(error).rstrip(".")}; the episode goes on unchanged.')
+            self._publish_result(step_id=0, reset_id=reset_id, info=f'error: {_text(error)}')
 
     def on_reset_service(self, request: Any) -> Any:
         """The ``reset`` service (rclpy mode): same as the topic, the node picks the id."""
         reset_id = self.reset_id + 1
         error = self.request_reset(request, reset_id)
-        return types.new(types.RESET_SRV_RESPONSE, success=not error, message=error or '',
+        return types.new(types.RESET_SRV_RESPONSE, success=error is None,
+                         message='' if error is None else _text(error),
                          reset_id=0 if error else reset_id)
 
-    def request_reset(self, msg: Any, reset_id: int) -> str | None:
+    def request_reset(self, msg: Any, reset_id: int) -> Exception | None:
         """Validate and apply a reset request (topic or service form).
 
         Returns:
-            None on success, else the error text (the state is unchanged then).
+            None on success, else the error: a ``CommandError`` for a bad field of the request,
+            the ``SimConfig`` error for a configuration it cannot have, or whatever else failed
+            (e.g. digits that cannot load). The state is unchanged then.
         """
         try:
             seed, challenge, setting = convert.reset_args(msg)
@@ -156,10 +167,8 @@ class ChamberNode:
             if changes:
                 cfg = cfg.replace(**changes)
             self._reset(seed, cfg, reset_id)
-        except ValueError as e:
-            return str(e)
-        except Exception as e:  # noqa: BLE001 - e.g. digits that cannot load: say so
-            return f'reset failed: {type(e).__name__}: {e}'
+        except Exception as e:  # noqa: BLE001 - reported to the client, never raised
+            return e
         return None
 
     def propose(self, values: dict[str, Any]) -> str | None:
@@ -224,9 +233,8 @@ class ChamberNode:
         text for the StepResult, else ''."""
         try:
             _apply(self.sim, msg)
-        except ValueError as e:
-            field = str(e).split(' ', 1)[0]
-            self.log.warn(f'command:{field}', f'light/command: {consequence}: {e}')
+        except CommandError as e:
+            self.log.warn(f'command:{e.field}', f'light/command: {consequence}: {e}')
             return f'error: {e}'
         if int(msg.mode) in (convert.MODE_BEAM, convert.MODE_SPOT):
             light = self.sim.chamber.light
