@@ -33,6 +33,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.node.interface import TOPICS
 from growspace_sim.recording import McapRecorder, RecordingError
+from growspace_sim.recording.chunk_writer import record_bytes
 from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
 from growspace_sim.ros import qos as ros_qos, types
 
@@ -338,10 +339,10 @@ def test_hand_packed_chunk_and_index_records_are_mcaps_own(recorded):
     for ci in chunk_indexes:
         start, end = ci.chunk_start_offset, ci.chunk_start_offset + ci.chunk_length
         (chunk,) = _records(data[start:end])
-        assert recording._record_bytes(chunk) == data[start:end]
+        assert record_bytes(chunk) == data[start:end]
         indexes = _records(data[end:end + ci.message_index_length])
         assert {type(r) for r in indexes} == {MessageIndex}
-        assert recording._record_bytes(*indexes) == data[end:end + ci.message_index_length]
+        assert record_bytes(*indexes) == data[end:end + ci.message_index_length]
         messages = breakup_chunk(chunk, validate_crc=True)
-        assert recording._record_bytes(*messages) == zstandard.ZstdDecompressor().decompress(
+        assert record_bytes(*messages) == zstandard.ZstdDecompressor().decompress(
             chunk.data, ci.uncompressed_size)

@@ -243,3 +243,21 @@ def test_sample_bags_are_small_and_reproducible():
         assert report.ok, (path, report.mismatch)
         challenges |= {e['challenge'] for e in replay.summary(path)['episodes']}
     assert challenges == set(CHALLENGES)
+
+
+@pytest.mark.parametrize('profile', [
+    ros_qos.QosProfile(), ros_qos.LATCHED, ros_qos.QosProfile(depth=100),
+    ros_qos.QosProfile(history='keep_all', reliability='best_effort')])
+def test_recorded_qos_reads_back_as_written(profile: ros_qos.QosProfile) -> None:
+    from growspace_sim.replay.bag import parse_qos
+
+    assert parse_qos(ros_qos.offered_qos_yaml([profile, ros_qos.DEFAULT])) == profile
+
+
+def test_rosbag2_v8_qos_integers_and_garbage() -> None:
+    from growspace_sim.replay.bag import parse_qos
+
+    v8 = ros_qos.offered_qos_yaml(ros_qos.LATCHED).replace('keep_last', '1').replace(
+        'reliable', '1').replace('transient_local', '1').replace('automatic', '1')
+    assert parse_qos(v8) == ros_qos.LATCHED
+    assert parse_qos('') == parse_qos('not: [yaml') == parse_qos('- {}') == ros_qos.DEFAULT

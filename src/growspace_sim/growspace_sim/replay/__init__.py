@@ -1,0 +1,31 @@
+"""Read GrowSpace recordings: summary, re-simulation check, GIF/MP4 export, republish, recovery.
+
+``growspace-replay`` subcommands:
+- ``info BAG``: episodes, returns, steps, duration, messages per topic;
+- ``check BAG``: re-simulate every episode from the recorded config, seed and commands and
+  report whether every image, plant state, applied light and reward is bit-identical (exit 0)
+  or the first mismatch (exit 1);
+- ``export BAG OUT.gif|OUT.mp4``: one episode's camera images, with a progress bar;
+- ``play BAG``: republish the messages on their topics over rclpy, with the recorded timing or
+  as fast as possible (``ros2 bag play`` where rosbag2 is not installed);
+- ``recover BAG OUT``: copy the complete chunks of a file cut short by a crash.
+
+Messages are read in file order, which is the order the node handled them in (the topics and
+their order are ``node.interface``; the episode structure is in ``docs/recording.md``).
+
+Modules, one job each: ``bag`` (reading), ``episodes`` (episode structure, summary), ``resim``
+(bit-for-bit re-simulation), ``export`` (GIF/MP4), ``play`` (republishing over rclpy) and
+``cli`` (``growspace-replay``, also ``python -m growspace_sim.replay``).
+"""
+
+from growspace_sim.replay.bag import Bag, BagMessage, ReplayError, TopicInfo
+from growspace_sim.replay.cli import main
+from growspace_sim.replay.episodes import (
+    Episode, StepRecord, format_summary, read_episodes, summary)
+from growspace_sim.replay.export import export_episode
+from growspace_sim.replay.play import play
+from growspace_sim.replay.resim import COMPARED, Mismatch, ResimReport, resimulate
+
+__all__ = ['Bag', 'BagMessage', 'COMPARED', 'Episode', 'Mismatch', 'ReplayError', 'ResimReport',
+           'StepRecord', 'TopicInfo', 'export_episode', 'format_summary', 'main', 'play',
+           'read_episodes', 'resimulate', 'summary']

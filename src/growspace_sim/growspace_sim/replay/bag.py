@@ -1,0 +1,197 @@
+"""Reading a GrowSpace recording: an MCAP file with the ROS 2 profile, messages in file order."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+from growspace_sim.node.interface import TOPICS
+from growspace_sim.recording import PROFILE
+from growspace_sim.ros import qos as ros_qos, types
+
+
+class ReplayError(Exception):
+    """Raised when a recording cannot be read or does not hold what the request needs."""
+
+
+# ---------------------------------------------------------------------- reading
+@dataclasses.dataclass(frozen=True)
+class BagMessage:
+    """One recorded message, still serialised."""
+
+    topic: str
+    typename: str
+    log_time: int  # ns
+    publish_time: int  # ns
+    data: bytes  # CDR with encapsulation header
+
+    def decode(self) -> Any:
+        return types.deserialize(self.data, self.typename)
+
+
+@dataclasses.dataclass(frozen=True)
+class TopicInfo:
+    topic: str
+    typename: str
+    qos: ros_qos.QosProfile
+    type_hash: str
+    count: int
+
+
+class Bag:
+    """A finished MCAP recording opened for reading (see ``recording.recover`` for broken ones).
+
+    Args:
+        path: The ``.mcap`` file.
+
+    Raises:
+        ReplayError: The file does not exist, is not MCAP, is not profile ``ros2``, or has no
+            summary (cut short by a crash: the message says how to recover it).
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        from mcap.reader import SeekingReader
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise ReplayError(f'No recording at {self.path}: the file does not exist.')
+        if self.path.is_dir():
+            raise ReplayError(f'{self.path} is a directory; give the path of a .mcap file.')
+        try:
+            self._stream = open(self.path, 'rb')
+        except OSError as e:
+            raise ReplayError(f'Cannot open {self.path}: {e.strerror or e}') from e
+        try:
+            self._reader = SeekingReader(self._stream, validate_crcs=True)
+            header = self._reader.get_header()
+        except Exception as e:  # noqa: BLE001 - InvalidMagic, EndOfFile, struct errors
+            self.close()
+            raise ReplayError(f'{self.path} is not an MCAP file ({type(e).__name__}).') from e
+        if header.profile != PROFILE:
+            self.close()
+            raise ReplayError(f'{self.path} has MCAP profile {header.profile!r}, expected '
+                              f'{PROFILE!r} (a ROS 2 recording).')
+        try:
+            summary = self._reader.get_summary()
+            if summary is None:
+                raise ValueError('no summary section')
+        except Exception as e:  # noqa: BLE001 - truncated footer or summary
+            self.close()
+            raise ReplayError(
+                f'{self.path} is incomplete ({e or type(e).__name__}): the recording was cut '
+                f'short, e.g. by a hard kill. Copy its complete chunks into a new file with '
+                f'`growspace-replay recover {self.path} FIXED.mcap`.') from e
+        self.summary = summary
+        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+        self.topics: dict[str, TopicInfo] = {}
+        self._channels: dict[int, TopicInfo] = {}
+        for cid, channel in summary.channels.items():
+            schema = summary.schemas.get(channel.schema_id)
+            if schema is None or channel.message_encoding != 'cdr':
+                continue
+            info = TopicInfo(channel.topic, schema.name,
+                             parse_qos(channel.metadata.get('offered_qos_profiles', '')),
+                             channel.metadata.get('topic_type_hash', ''), counts.get(cid, 0))
+            self._channels[cid] = info
+            self.topics[channel.topic] = info
+        self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+
+    @property
+    def start_time(self) -> int:
+        return self.summary.statistics.message_start_time if self.summary.statistics else 0
+
+    @property
+    def end_time(self) -> int:
+        return self.summary.statistics.message_end_time if self.summary.statistics else 0
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+        """Messages in file order (the order they were recorded in).
+
+        Args:
+            topics: Only these topics; None = all.
+        """
+        wanted = None if topics is None else set(topics)
+        for _, channel, message in self._reader.iter_messages(
+                topics=None if wanted is None else list(wanted), log_time_order=False):
+            info = self._channels.get(channel.id)
+            if info is None:
+                continue
+            yield BagMessage(info.topic, info.typename, message.log_time,
+                             message.publish_time, message.data)
+
+    def chamber_topics(self, namespace: str | None = None) -> dict[str, str]:
+        """Map the node's relative topic names to the recorded ones.
+
+        Args:
+            namespace: The chamber namespace; None = the only chamber in the file.
+
+        Returns:
+            Relative name (``step_result``) -> recorded name (``/growspace/step_result``).
+
+        Raises:
+            ReplayError: No chamber, or several and no namespace given.
+        """
+        candidates = sorted(t[:-len('/step_result')] or '/' for t, i in self.topics.items()
+                            if t.endswith('/step_result') and i.typename == types.STEP_RESULT)
+        if namespace is not None:
+            namespace = '/' + namespace.strip('/') if namespace.strip('/') else '/'
+            if namespace not in candidates:
+                raise ReplayError(f'{self.path} has no chamber in namespace {namespace!r}; '
+                                  f'found {candidates or "none"}.')
+        elif len(candidates) == 1:
+            namespace = candidates[0]
+        elif not candidates:
+            raise ReplayError(f'{self.path} holds no {types.STEP_RESULT} topic: not a GrowSpace '
+                              f'chamber recording.')
+        else:
+            raise ReplayError(f'{self.path} holds several chambers {candidates}; pick one with '
+                              f'--namespace.')
+        prefix = '' if namespace == '/' else namespace
+        out = {}
+        for topic in TOPICS:
+            rel = topic.name
+            full = rel if rel.startswith('/') else f'{prefix}/{rel}'
+            if full in self.topics:
+                out[rel] = full
+        return out
+
+    def close(self) -> None:
+        self._stream.close()
+
+    def __enter__(self) -> Bag:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def parse_qos(text: str) -> ros_qos.QosProfile:
+    """The first profile of an ``offered_qos_profiles`` YAML string (rosbag2 v8 or v9).
+
+    rosbags parses it (``rosbags.rosbag2.metadata.parse_qos``); unknown or missing values fall
+    back to the ROS default profile.
+    """
+    from rosbags.rosbag2.errors import ReaderError
+    from rosbags.rosbag2.metadata import parse_qos as rosbags_parse_qos
+
+    try:
+        profiles = rosbags_parse_qos(text)
+    except (ReaderError, KeyError, TypeError, ValueError):
+        return ros_qos.DEFAULT
+    if not profiles:
+        return ros_qos.DEFAULT
+    qos = profiles[0]
+    fields: dict[str, Any] = {}
+    for key, value in (('history', qos.history), ('reliability', qos.reliability),
+                       ('durability', qos.durability), ('liveliness', qos.liveliness)):
+        name = value.name.lower()
+        if name not in ('unknown', 'system_default', 'best_available'):
+            fields[key] = name
+    if isinstance(qos.depth, int) and qos.depth > 0:
+        fields['depth'] = qos.depth
+    try:
+        return ros_qos.QosProfile(**fields)
+    except ValueError:
+        return ros_qos.DEFAULT
