@@ -96,12 +96,21 @@ case "$cmd" in
   sweep) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)
-    if ! command -v python3.12 > /dev/null; then
-      echo "test-compat: skipped, python3.12 is not on this machine (Jazzy's Python on" \
-           "Ubuntu 24.04); install it to check the Python 3.12 + numpy 1.26 pair." >&2
+    py312=
+    for candidate in "${GROWSPACE_PYTHON312:-python3.12}" /usr/bin/python3.12 \
+        "${PYENV_ROOT:-$HOME/.pyenv}"/versions/3.12*/bin/python3.12; do
+      if "$candidate" -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2> /dev/null; then
+        py312=$candidate
+        break
+      fi
+    done
+    if [ -z "$py312" ]; then
+      echo "test-compat: skipped, no Python 3.12 on this machine (Jazzy's Python on Ubuntu" \
+           "24.04); install one (or set GROWSPACE_PYTHON312) to check the 3.12 + numpy 1.26" \
+           "pair." >&2
       exit 0
     fi
-    setup .venv-compat .venv-compat/ws python3.12 requirements.txt requirements-compat.txt
+    setup .venv-compat .venv-compat/ws "$py312" requirements.txt requirements-compat.txt
     sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
       tests/test_core.py tests/test_envs.py tests/test_digits.py tests/test_agents.py \
       tests/test_ros_node.py tests/test_bridge.py ;;
