@@ -46,6 +46,7 @@ build() {
   if [ ! -f "$stamp" ]; then
     echo "Building the workspace into $ws/install (colcon, about 30 s) ..." >&2
     rm -rf "$ws/build" "$ws/install"
+    mkdir -p "$ws"
     (export PATH="$ROOT/$venv/bin:$PATH" AMENT_PREFIX_PATH="$ROOT/$venv" \
        CMAKE_PREFIX_PATH="$ROOT/$venv"
      colcon --log-base "$ws/log" build --base-paths src --build-base "$ws/build" \
