@@ -62,6 +62,7 @@ build() {
   # shellcheck disable=SC1091
   source "$ws/install/local_setup.bash"
   set -u
+  export PATH="$ROOT/$ws/install/growspace_sim/lib/growspace_sim:$PATH"  # as `ros2 run` finds them
 }
 
 # sandboxed CMD...: run CMD in a private network namespace holding only loopback, if the OS
