@@ -117,10 +117,14 @@ class RclpyTransport:
         self.logger = ThrottledLogger(log.warning, log.info)
         self._publishers: dict[str, Any] = {}
         self._subscriptions: dict[str, Any] = {}
+        self._resolved: dict[str, str] = {}
         self._closed = False
 
     def resolve(self, topic: str) -> str:
-        return self.node.resolve_topic_name(topic)
+        name = self._resolved.get(topic)
+        if name is None:  # rcl's expansion and remapping cost microseconds; names never change
+            name = self._resolved[topic] = self.node.resolve_topic_name(topic)
+        return name
 
     def publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> PublishFn:
         pub = self.node.create_publisher(interface_class(typename), topic, to_rclpy_qos(qos))
