@@ -4,13 +4,13 @@
 Method: control easy (``--id`` to change), random discrete actions (seeded), 50-step
 episodes ended by a seeded reset that counts in the time. Rows: one env, and a vector of 2
 (Sync; Async with spawned workers). Bridged envs start their own lockstep nodes (one per
-sub-env, loopback DDS, a random domain in 100-200). ``no state`` is the bridged env with
+sub-env, rclpy, loopback only, a random domain). ``no state`` is the bridged env with
 ``with_state=False`` (no plant/light state in ``info``; the node then skips building them).
 Each figure is the best of ``--repeats`` runs of ``--episodes`` episodes, after one warm-up
 episode. A vector step counts as 2 env steps.
 
-Usage (from the workspace root):
-    PYTHONPATH=src/growspace_sim:src/growspace_gym_bridge python scripts/bench_bridge.py
+Usage (workspace sourced, e.g. through ``./run.sh``'s environment):
+    python scripts/bench_bridge.py [--episodes 10] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -72,8 +72,10 @@ def main() -> int:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--id', default='Control-Easy-v0', help='id without its prefix')
     args = parser.parse_args()
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(100, 200)))
-    os.environ.setdefault('GROWSPACE_TRANSPORT', 'dds')
+    from growspace_sim.ros import loopback
+
+    loopback.confine()
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 101)))
 
     import gymnasium as gym
 
