@@ -23,6 +23,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from bench_common import cpu_seconds
+
 EPISODE = 50
 
 
@@ -107,6 +109,17 @@ def main() -> int:
     for name, inproc, full, lean in rows:
         print(f'| {name} | {inproc:,.0f} | {full:,.0f} | {full / inproc:.0%} | {lean:,.0f} | '
               f'{lean / inproc:.0%} |')
+    env = gym.make(bridged)
+    try:
+        env.reset(seed=s)
+        cpu, node_cpu = time.process_time(), cpu_seconds(env.unwrapped.node_pid)
+        run_single(env, e, s)
+        steps = (e + 1) * EPISODE
+        client = (time.process_time() - cpu) / steps * 1e6
+        node = (cpu_seconds(env.unwrapped.node_pid) - node_cpu) / steps * 1e6
+        print(f'CPU per step, one bridged env: client {client:.0f} us, node {node:.0f} us')
+    finally:
+        env.close()
     return 0
 
 

@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+from bench_common import cpu_seconds, sim_node_executable
+
 ROOT = Path(__file__).resolve().parents[1]
 EPISODE = 50
 TIMEOUT_S = 10.0
@@ -100,16 +102,8 @@ class Client:
         self._wait(0, reset_id)
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process [s] (Linux /proc)."""
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
 def over_ros(episodes: int, repeats: int, seed: int) -> tuple[list[float], float, float]:
     """Steps/s of each repeat, and node and client CPU per step [s]."""
-    from ros_paths import sim_node_executable
-
     node = subprocess.Popen([sim_node_executable(), '--ros-args', '-r', '__ns:=/bench',
                              '-p', f'seed:={seed}'], stderr=subprocess.DEVNULL)
     rates = []
