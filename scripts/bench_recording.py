@@ -28,7 +28,8 @@ import time
 
 import numpy as np
 
-from growspace_sim.core.config import CHALLENGES, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.simulation import Simulation
@@ -77,7 +78,7 @@ def run(variant: str, cfg: SimConfig, plan: np.ndarray, path: Path) -> int:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--challenge', choices=CHALLENGES, default='control')
+    parser.add_argument('--challenge', choices=tasks.names(), default='control')
     parser.add_argument('--episodes', type=int, default=8)
     parser.add_argument('--rounds', type=int, default=15)
     parser.add_argument('--json', type=Path, help='also write the results here')

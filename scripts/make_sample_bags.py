@@ -15,7 +15,8 @@ import sys
 
 from growspace_sim import replay
 from growspace_sim.agents import OracleAgent
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 
@@ -30,8 +31,8 @@ def main() -> int:
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     total = 0
-    for challenge in CHALLENGES:
-        for setting in SETTINGS:
+    for challenge in tasks.names():
+        for setting in tasks.SETTINGS:
             path = args.out / f'oracle_{challenge}_{setting}.mcap'
             with McapRecorder(path, overwrite=args.force) as recorder:
                 # The shape task uses the built-in digit sample so every machine re-simulates it.

@@ -14,7 +14,8 @@ import pytest
 
 from growspace_sim import recording, replay
 from growspace_sim.agents import OracleAgent
-from growspace_sim.core.config import CHALLENGES, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay import Bag, ReplayError
@@ -35,7 +36,7 @@ def record(path: Path, challenge: str = 'control', seeds=(5, 6)) -> list[float]:
     return returns
 
 
-@pytest.mark.parametrize('challenge', CHALLENGES)
+@pytest.mark.parametrize('challenge', tasks.names())
 def test_resimulation_matches_bit_for_bit(tmp_path, challenge):
     path = tmp_path / f'{challenge}.mcap'
     record(path, challenge)
@@ -242,7 +243,7 @@ def test_sample_bags_are_small_and_reproducible():
         report = replay.resimulate(path)
         assert report.ok, (path, report.mismatch)
         challenges |= {e['challenge'] for e in replay.summary(path)['episodes']}
-    assert challenges == set(CHALLENGES)
+    assert challenges == set(tasks.names())
 
 
 @pytest.mark.parametrize('profile', [

@@ -26,7 +26,8 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
 from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
 import growspace_sim.registration  # noqa: F401 - registers the GrowSpace ids
-from growspace_sim.core.config import CHALLENGES
+from growspace_sim.core import task as tasks
+
 from growspace_sim.node import interface, params
 from growspace_sim.ros import types
 
@@ -265,11 +266,11 @@ def test_same_seed_gives_same_episode_other_seed_differs(fresh: Client) -> None:
     assert runs[0] != runs[2]
 
 
-@pytest.mark.parametrize('challenge', CHALLENGES)
+@pytest.mark.parametrize('challenge', tasks.names())
 def test_episode_over_ros_is_bit_identical_to_in_process(fresh: Client, challenge: str) -> None:
     env = gymnasium.make(growspace_sim.registration.env_id(challenge, 'easy'),
                          episode_length=EPISODE)
-    seed, reset_id = 11, 300 + CHALLENGES.index(challenge)
+    seed, reset_id = 11, 300 + tasks.names().index(challenge)
     try:
         obs, _ = env.reset(seed=seed)
         result = reset_and_wait(fresh, reset_id, seed, challenge=challenge, setting='easy')

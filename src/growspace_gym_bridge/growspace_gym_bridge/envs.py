@@ -254,7 +254,7 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
         self._reset_id += 1
         self._episode_reset_id, self._step_id = None, 0
         reply = self.link.reset(self._reset_id, seed, self.cfg.challenge, self.cfg.setting,
-                                self.timeout_s, with_config=self.cfg.challenge == 'shape')
+                                self.timeout_s, with_config=self.cfg.task.digits is not None)
         if reply.result.info:
             raise CommandRejected(f'{self.link.transport.resolve("reset")}: reset_id '
                                   f'{self._reset_id} refused: {reply.result.info}')
@@ -337,6 +337,6 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
             info['light'] = {'x': reply.light.x, 'z': reply.light.z, 'width': reply.light.width,
                              'radius': reply.light.radius}
         info['success'] = bool(result.success)
-        if self.cfg.challenge == 'shape':
+        if self.cfg.task.digits is not None:
             info['digit'] = self._digit
         return info

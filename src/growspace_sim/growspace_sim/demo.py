@@ -20,7 +20,8 @@ import numpy as np
 
 from growspace_sim import replay
 from growspace_sim.agents import OracleAgent, RandomAgent
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.ros import loopback
@@ -29,9 +30,9 @@ from growspace_sim.ros import loopback
 def record_oracle(path: Path, setting: str, seed: int) -> None:
     """One oracle episode per challenge on an in-process chamber node, recorded to ``path``."""
     with McapRecorder(path) as recorder:
-        runner = EpisodeRunner(SimConfig(challenge=CHALLENGES[0], setting=setting), recorder)
+        runner = EpisodeRunner(SimConfig(challenge=tasks.names()[0], setting=setting), recorder)
         oracle = OracleAgent()
-        for challenge in CHALLENGES:
+        for challenge in tasks.names():
             total, steps = runner.run_episode(oracle.act, seed, challenge=challenge)
             print(f'  oracle  {challenge:10s} {setting}: return {total:6.2f} over {steps} steps')
         runner.close()
@@ -75,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--out', default='bags', help='parent directory (default: bags/)')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--setting', default='hard', choices=SETTINGS)
+    parser.add_argument('--setting', default='hard', choices=tasks.SETTINGS)
     parser.add_argument('--no-ros', action='store_true',
                         help='skip the sim_node + bridge part (no ROS 2)')
     args = parser.parse_args(argv)

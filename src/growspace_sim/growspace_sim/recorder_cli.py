@@ -22,7 +22,8 @@ import time
 from typing import Any, Callable
 
 from growspace_sim import convert, recording
-from growspace_sim.core.config import CHALLENGES, SETTINGS, SimConfig
+from growspace_sim.core import task as tasks
+from growspace_sim.core.config import SimConfig
 from growspace_sim.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
 from growspace_sim.node.interface import TOPICS
 from growspace_sim.ros import names, qos as ros_qos
@@ -124,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest='command', required=True)
     p_run = sub.add_parser('run', help='run episodes in-process and record them')
     p_run.add_argument('out')
-    p_run.add_argument('--challenge', choices=CHALLENGES, default='control')
-    p_run.add_argument('--setting', choices=SETTINGS, default='easy')
+    p_run.add_argument('--challenge', choices=tasks.names(), default='control')
+    p_run.add_argument('--setting', choices=tasks.SETTINGS, default='easy')
     p_run.add_argument('--episodes', type=int, default=1)
     p_run.add_argument('--agent', choices=('oracle', 'random'), default='oracle')
     p_run.add_argument('--seed', type=int, default=0, help='episode i uses seed + i')

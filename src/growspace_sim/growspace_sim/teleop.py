@@ -17,6 +17,7 @@ import sys
 from typing import Any, Sequence
 
 from growspace_sim import convert
+from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
 from growspace_sim.ros import qos as ros_qos, types
@@ -78,8 +79,8 @@ class Teleop:
         try:
             payload = json.loads(msg.data)
             self.mode = payload['mode']
-            self.spot = payload['config']['challenge'] == 'shape'
-        except (ValueError, KeyError, TypeError):
+            self.spot = SimConfig.from_dict(payload['config']).uses_spotlight
+        except (ValueError, KeyError, TypeError):  # not a chamber's config: keep what we know
             pass
 
     def press(self, key: int | str) -> bool:

@@ -163,13 +163,6 @@ class SimConfig:
         return fraction * self.chamber_width
 
 
-def __getattr__(name: str) -> tuple[str, ...]:
-    """``CHALLENGES``: the registered challenge names when read (``core.task.names()``)."""
-    if name == 'CHALLENGES':
-        return tasks.names()
-    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-
-
 def _check_choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
     if value not in allowed:
         raise ValueError(f'{name} must be one of {allowed}, got {value!r}.')
