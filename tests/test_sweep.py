@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -111,18 +112,21 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     env = child_env()
     env['TUNE_GLOBAL_CHECKPOINT_S'] = '0'  # Tune saves its state at every step
     env.pop('RAY_ADDRESS', None)
-    child = subprocess.Popen(
-        [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
-         '--workers', '1', '--quiet', '--no-plots'],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _wait_for(lambda: _finished(out), 3, child)
-    child.send_signal(signal.SIGKILL)
-    child.wait(timeout=30)
+    with open(tmp_path / 'killed.log', 'w') as log:
+        child = subprocess.Popen(
+            [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
+             '--workers', '1', '--quiet', '--no-plots'],
+            env=env, stdout=log, stderr=subprocess.STDOUT)
+        _wait_for(lambda: _finished(out), 3, child, tmp_path / 'killed.log')
+        killed = time.time()
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
     finished = _finished(out)  # one more may have finished before the signal landed
     assert 3 <= len(finished) < n, 'the sweep was not killed mid-way'
+    assert all(len(runs) == 1 for runs in finished.values())
     # One trial at a time: a trial starts only after Tune saved the previous one as finished,
     # so every finished trial but the newest one is on record.
-    newest = max(finished, key=lambda k: finished[k]['started'])
+    newest = max(finished, key=lambda k: finished[k][0]['started'])
     on_record = {k: v for k, v in finished.items() if k != newest}
 
     assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
@@ -130,36 +134,34 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
 
     after = _finished(out)
     assert len(after) == n
-    for key, summary in on_record.items():
-        assert after[key] == summary, f'{key} ran again'
-    reran = [k for k in after if k not in on_record]
-    assert len(reran) >= n - len(finished)
-    for key in after:  # one execution (one reported result) per trial
-        lines = (out / 'tune' / key / 'result.json').read_text().splitlines()
-        assert len(lines) == 1, key
+    for key, runs in on_record.items():  # still the one execution of the first sweep
+        assert after[key] == runs, f'{key} ran again'
+    for key in after.keys() - finished.keys():  # run by the second sweep, not a leftover
+        assert [datetime.fromisoformat(r['started']).timestamp() > killed
+                for r in after[key]] == [True], key
     assert {t['status'] for t in _read_csv(out / 'trials.csv')} == {'ok'}
 
 
-def _finished(out: Path) -> dict[str, dict]:
-    """trial.json of every trial whose checkpoint Ray Tune has written, by trial key."""
-    found = {}
-    for path in (out / 'tune').glob('*/checkpoint_*/trial.json'):
+def _finished(out: Path) -> dict[str, list[dict]]:
+    """Per trial key, the trial.json of each checkpoint Tune wrote: one per execution."""
+    found: dict[str, list[dict]] = {}
+    for path in sorted((out / 'tune').glob('*/checkpoint_*/trial.json')):
         try:
-            found[path.parent.parent.name] = json.loads(path.read_text())
+            found.setdefault(path.parent.parent.name, []).append(json.loads(path.read_text()))
         except ValueError:  # being written
             continue
     return found
 
 
-def _wait_for(check, count: int, child: subprocess.Popen, timeout: float = 180.0) -> dict:
+def _wait_for(check, count: int, child: subprocess.Popen, log: Path,
+              timeout: float = 180.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        found = check()
-        if len(found) >= count:
-            return found
+        if len(check()) >= count:
+            return
         if child.poll() is not None:
             pytest.fail(f'the sweep exited early ({child.returncode}): '
-                        f'{child.stderr.read().decode()[-2000:]}')
+                        f'{log.read_text()[-2000:]}')
         time.sleep(0.1)
     child.kill()
     pytest.fail(f'fewer than {count} trials finished in {timeout} s')

@@ -56,6 +56,7 @@ import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -307,7 +308,7 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     else:
         rewards, eval_env, label, steps = _train_and_evaluate(trial, out / 'run')
     returns = rewards.sum(axis=1)
-    mean, se = evaluate._mean_se(returns)
+    mean, se = evaluate.mean_se(returns)
     wall = time.perf_counter() - start
     np.save(out / 'rewards.npy', rewards)
     with open(out / 'evaluation.csv', 'w', newline='') as f:
@@ -319,8 +320,7 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     summary = dict(trial=asdict(trial), key=trial.key, label=trial.label or label,
                    eval_env=eval_env, steps=steps, mean=mean, se=se, wall_s=round(wall, 3),
                    host=socket.gethostname(), pid=os.getpid(),
-                   started=time.strftime('%Y-%m-%dT%H:%M:%S', time.gmtime(started))
-                   + f'.{int(started % 1 * 1e6):06d}Z')
+                   started=datetime.fromtimestamp(started, timezone.utc).isoformat())
     (out / 'trial.json').write_text(json.dumps(summary, indent=2) + '\n')
     return {'mean': mean, 'se': se, 'wall_s': wall}
 
@@ -423,12 +423,15 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
     trainable = tune.with_resources(
         tune.with_parameters(_tune_trial, trials={k: asdict(t) for k, t in by_key.items()}),
         {'cpu': cpus_per_trial, 'gpu': gpus_per_trial})
+    # Given again on restore: Tune creates the trials it had not created yet from it.
+    param_space = {'trial': tune.grid_search(list(by_key))}
     if tune.Tuner.can_restore(path):
-        tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored)
+        tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored,
+                                   param_space=param_space)
     else:
         tuner = tune.Tuner(
             trainable,
-            param_space={'trial': tune.grid_search(list(by_key))},
+            param_space=param_space,
             tune_config=tune.TuneConfig(max_concurrent_trials=workers,
                                         reuse_actors=reuse_actors,
                                         trial_name_creator=_trial_key,
