@@ -1,8 +1,9 @@
 """growspace-sweep: experiments as Ray Tune trials on a local Ray bound to 127.0.0.1.
 
-Needs ray[tune] (requirements-sweep.txt); skipped without it. Evaluation trials only (random
-and oracle agents), so no torch. One local Ray instance with 2 CPUs serves the in-process
-sweeps; the interrupted sweep runs in a child process that is killed with SIGKILL.
+Needs ray[tune] (requirements-sweep.txt); skipped without it. Evaluation trials (random and
+oracle agents) need no torch; the one training sweep is skipped without requirements-learn.txt.
+One local Ray instance with 2 CPUs serves the in-process sweeps; the interrupted sweep runs in
+a child process that is killed with SIGKILL.
 """
 
 from __future__ import annotations
@@ -190,3 +191,37 @@ def test_bad_spec_names_the_field_the_value_and_what_is_allowed(change, message)
     with pytest.raises(sweep.SpecError) as error:
         sweep.parse_spec(data)
     assert message in str(error.value)
+
+
+def test_shipped_specs_expand_to_their_trials():
+    root = Path(__file__).resolve().parent.parent / 'config' / 'sweeps'
+    reference = sweep.load_spec(root / 'reference_agents.yaml')
+    assert len(reference.trials) == 8 * 5 + 8  # the oracle is deterministic: one seed
+    if importlib.util.find_spec('stable_baselines3') is None:
+        with pytest.raises(sweep.SpecError, match='need the learn extra'):
+            sweep.load_spec(root / 'case_studies.yaml')
+        return
+    cases = sweep.load_spec(root / 'case_studies.yaml')
+    learners = [t for t in cases.trials if t.agent in sweep.LEARNERS]
+    assert len(learners) == 3 + 8 * 2 + 2 + 3
+    curriculum = [t for t in learners if t.env == 'GrowSpace/Shape-Curriculum-v0']
+    assert [(t.n_envs, t.hp, t.env_kwargs) for t in curriculum] == \
+        [(8, {'n_steps': 256, 'batch_size': 64}, {'episodes_per_stage': 12})] * 2
+
+
+def test_training_sweep_trains_evaluates_and_plots(tmp_path, local_ray):
+    pytest.importorskip('stable_baselines3', reason='needs requirements-learn.txt')
+    spec = _write_spec(tmp_path / 'train.yaml', [
+        {'agents': ['ppo'], 'envs': ['GrowSpace/Control-Hard-v0'], 'seeds': 2, 'steps': 256,
+         'n_envs': 2, 'hp': {'n_steps': 64, 'batch_size': 32, 'n_epochs': 1}},
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Hard-v0']}], episodes=3)
+
+    assert sweep.main([str(spec), '--out', str(tmp_path / 'out'), '--workers', '2',
+                       '--quiet']) == 0
+
+    rows = {r['agent']: r for r in _read_csv(tmp_path / 'out' / 'results.csv')}
+    assert (rows['ppo']['runs'], rows['ppo']['steps']) == ('2', '256')
+    run = tmp_path / 'out' / 'trials' / 'ppo-control-hard-s1' / 'run'
+    assert json.loads((run / 'run.json').read_text())['seed'] == 1
+    assert (run / 'model.zip').exists() and (run / 'episodes.csv').exists()
+    assert (tmp_path / 'out' / 'training.png').stat().st_size > 0
