@@ -211,6 +211,8 @@ def test_shipped_specs_expand_to_their_trials():
 
 def test_training_sweep_trains_evaluates_and_plots(tmp_path, local_ray):
     pytest.importorskip('stable_baselines3', reason='needs requirements-learn.txt')
+    from growspace_sim.learn import train  # noqa: PLC0415
+    assert sorted(sweep.LEARNERS) == sorted(train.ALGOS)
     spec = _write_spec(tmp_path / 'train.yaml', [
         {'agents': ['ppo'], 'envs': ['GrowSpace/Control-Hard-v0'], 'seeds': 2, 'steps': 256,
          'n_envs': 2, 'hp': {'n_steps': 64, 'batch_size': 32, 'n_epochs': 1}},
