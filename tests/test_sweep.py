@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -57,6 +58,13 @@ def test_evaluation_sweep_on_two_workers_equals_sequential_growspace_eval(tmp_pa
     nodes = local_ray.nodes()
     assert [n['NodeManagerAddress'] for n in nodes] == ['127.0.0.1']
     assert local_ray.cluster_resources()['CPU'] == 2
+
+    def proxies() -> list[str | None]:
+        return [os.environ.get(name) for name in sweep.LOCAL_ONLY_ENV]
+
+    # Ray's processes send HTTP to a closed loopback port; the driver's environment is restored.
+    assert local_ray.get(local_ray.remote(proxies).remote()) == list(sweep.LOCAL_ONLY_ENV.values())
+    assert os.environ.get('https_proxy') != sweep.LOCAL_ONLY_ENV['https_proxy']
     spec = _write_spec(tmp_path / 'equal.yaml', [
         {'agents': ['random', 'oracle'],
          'envs': ['GrowSpace/Control-Hard-v0', 'GrowSpace/Fairness-Easy-v0']}],

@@ -36,14 +36,16 @@ Usage::
         --episodes 20 --name quick
     growspace-sweep SPEC --address HEAD_IP:6379 --storage /shared/sweeps     # a Ray cluster
 
-Ray: a local instance bound to 127.0.0.1 (no dashboard, no usage stats) unless ``--address`` or
-``RAY_ADDRESS`` names a cluster. Run the same command again after an interruption: finished
-trials are kept, the others run (``--retry-errored`` also reruns failed ones).
+Ray: a local instance bound to 127.0.0.1 (no dashboard, no usage stats, nothing sent beyond
+loopback; see ``connect``) unless ``--address`` or ``RAY_ADDRESS`` names a cluster. Run the
+same command again after an interruption: finished trials are kept, the others run
+(``--retry-errored`` also reruns failed ones).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import importlib.util
 import json
@@ -58,7 +60,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -75,6 +77,15 @@ GROUP_KEYS = ('agents', 'envs', 'seeds', 'steps', 'hp', 'n_envs', 'max_minutes',
               'env_kwargs', 'label')
 LEARNER_KEYS = ('steps', 'hp', 'n_envs', 'max_minutes', 'device')
 LOOPBACK = '127.0.0.1'
+# Ray 2.60 starts a minimal dashboard process even without the dashboard, and its usage module
+# asks the cloud metadata addresses (169.254.169.254, metadata.google.internal) which cloud it
+# runs on, whatever RAY_USAGE_STATS_ENABLED says. That HTTP client honours the proxy variables:
+# the local instance's processes send it to a closed loopback port (no DNS query, no packet
+# leaves), while Ray's own gRPC and HTTP to 127.0.0.1 stay direct.
+_NO_PROXY = f'{LOOPBACK},localhost,::1'
+LOCAL_ONLY_ENV = {name: value for names, value in (
+    (('http_proxy', 'https_proxy', 'HTTP_PROXY', 'HTTPS_PROXY'), f'http://{LOOPBACK}:9'),
+    (('no_proxy', 'NO_PROXY'), _NO_PROXY)) for name in names}
 TRIAL_COLUMNS = ('key', 'agent', 'env', 'seed', 'status', 'mean', 'se', 'wall_s', 'error')
 
 
@@ -378,8 +389,24 @@ def connect(address: str | None, workers: int | None) -> None:
         raise RuntimeError('ray was imported before growspace_sim.sweep.connect(), so a local '
                            'Ray would not stay on 127.0.0.1; set '
                            'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 before importing ray.')
-    ray.init(address='local', num_cpus=workers, include_dashboard=False,
-             _node_ip_address=LOOPBACK, log_to_driver=False)
+    with _environ(LOCAL_ONLY_ENV):
+        ray.init(address='local', num_cpus=workers, include_dashboard=False,
+                 _node_ip_address=LOOPBACK, log_to_driver=False)
+
+
+@contextlib.contextmanager
+def _environ(values: Mapping[str, str]) -> Iterator[None]:
+    """Set environment variables for the processes started inside the block."""
+    saved = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
