@@ -419,7 +419,8 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
         spec: The experiment.
         out: Local folder of the experiment's results (``spec.json``, ``trials/<key>/``).
         storage: Ray Tune's storage (a path every node sees, or a URI); default ``out``.
-        workers: Trials at once at most (default: as many as the resources allow).
+        workers: Trials at once at most (default: as many as the resources allow). A
+            resumed experiment keeps its first run's ``workers`` and ``reuse_actors``.
         cpus_per_trial: CPUs Ray reserves for each trial.
         gpus_per_trial: GPUs Ray reserves for each trial.
         retry_errored: On a resumed experiment, run the failed trials again.
