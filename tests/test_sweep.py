@@ -108,8 +108,8 @@ def test_failing_trial_is_reported_with_its_error_and_the_others_finish(
     error = trials['dense-control-easy-s0']['error']
     assert error.startswith('ValueError: light_density must be in [1, 100000], got 0')
     assert f'trial dense-control-easy-s0 failed: {error}' in capsys.readouterr().err
-    assert [(r['agent'], r['episodes']) for r in _read_csv(tmp_path / 'out' / 'results.csv')] \
-        == [('random', '4')]
+    assert [(r['agent'], r['runs'], r['episodes'])
+            for r in _read_csv(tmp_path / 'out' / 'results.csv')] == [('random', '2', '4')]
 
 
 def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path, local_ray):

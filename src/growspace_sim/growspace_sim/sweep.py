@@ -57,7 +57,7 @@ import socket
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterator, Mapping
@@ -526,6 +526,9 @@ def summarise(outcomes: list[Outcome], out: str | os.PathLike,
                 str(o.files / 'run'))
     rows = [row for env_id, results in curves.items()
             for row in evaluate_policies.rows_for(env_id, results)]
+    # rows_for counts trained runs; a random agent's seeds are pooled the same way.
+    rows = [replace(r, runs=len(curves[r.env][r.agent]['rewards']))
+            if r.agent in BASELINES else r for r in rows]
     evaluate_policies.write_csv(rows, out / 'results.csv')
     (out / 'results.md').write_text(evaluate_policies.markdown(rows) + '\n')
     np.savez_compressed(out / 'rewards.npz', **{
