@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Wall time of a fixed growspace-sweep with 1 and 2 trials at once, and Ray's cost per trial.
 
-One local Ray instance (bound to 127.0.0.1, as growspace-sweep starts it) with --cpus CPUs;
-every sweep starts from an empty folder. For each sweep: the wall time of the Tune run (Ray's
+One local Ray instance (bound to 127.0.0.1, as growspace-sweep starts it) with --cpus CPUs,
+warmed up by a one-trial sweep (Tune's first run in a process pays its imports); every sweep
+starts from an empty folder. For each sweep: the wall time of the Tune run (Ray's
 start-up is timed once, apart), the work the trials did (the sum of their own wall_s, measured
 inside the trial) and Ray's overhead per trial = (wall x concurrency - work) / trials, the
 time a trial slot is busy with something other than the trial's work. The sequential row runs
@@ -57,6 +58,10 @@ def main() -> int:
         start = time.perf_counter()
         sweep.connect(None, args.cpus)
         startup = time.perf_counter() - start
+        warm = sweep.Spec('warm-up', spec.episodes, 0, spec.trials[:1])
+        start = time.perf_counter()
+        sweep.run_sweep(warm, Path(tmp) / 'warm-up', workers=1, verbose=0)
+        first = time.perf_counter() - start
         for workers in map(int, args.workers.split(',')):
             start = time.perf_counter()
             outcomes = sweep.run_sweep(spec, Path(tmp) / f'w{workers}', workers=workers,
@@ -70,7 +75,8 @@ def main() -> int:
     print(f'{len(spec.trials)} trials of {args.agent} on {args.env} '
           f'({args.episodes} evaluation episodes'
           + (f', {args.steps} training steps' if args.agent in sweep.LEARNERS else '')
-          + f'); Ray start-up {startup:.1f} s; fresh processes: {args.fresh_processes}\n')
+          + f'); Ray start-up {startup:.1f} s, a first one-trial sweep (not timed below) '
+          f'{first:.1f} s; fresh processes: {args.fresh_processes}\n')
     print(f'load average before / after: {load[0]:.1f} / {os.getloadavg()[0]:.1f}\n')
     print('| mode | trials at once | wall s | trial work s | Ray overhead per trial s |')
     print('|---|---|---|---|---|')
@@ -78,7 +84,7 @@ def main() -> int:
         print(f'| {r["mode"]} | {r["workers"]} | {r["wall_s"]:.1f} | {r["work_s"]:.1f} '
               f'| {r["overhead_s"]:.2f} |')
     if args.json:
-        figures = dict(startup_s=startup, load=load, rows=rows)
+        figures = dict(startup_s=startup, first_sweep_s=first, load=load, rows=rows)
         Path(args.json).write_text(json.dumps(figures, indent=1))
     return 0
 

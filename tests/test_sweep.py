@@ -1,8 +1,9 @@
 """growspace-sweep: experiments as Ray Tune trials on a local Ray bound to 127.0.0.1.
 
-Needs ray[tune] (requirements-sweep.txt); skipped without it. Evaluation trials only (random
-and oracle agents), so no torch. One local Ray instance with 2 CPUs serves the in-process
-sweeps; the interrupted sweep runs in a child process that is killed with SIGKILL.
+Needs ray[tune] (requirements-sweep.txt); skipped without it. Evaluation trials (random and
+oracle agents) need no torch; the one training sweep is skipped without requirements-learn.txt.
+One local Ray instance with 2 CPUs serves the in-process sweeps; the interrupted sweep runs in
+a child process that is killed with SIGKILL.
 """
 
 from __future__ import annotations
@@ -10,10 +11,12 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import os
 import signal
 import subprocess
 import sys
 import time
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -55,6 +58,13 @@ def test_evaluation_sweep_on_two_workers_equals_sequential_growspace_eval(tmp_pa
     nodes = local_ray.nodes()
     assert [n['NodeManagerAddress'] for n in nodes] == ['127.0.0.1']
     assert local_ray.cluster_resources()['CPU'] == 2
+
+    def proxies() -> list[str | None]:
+        return [os.environ.get(name) for name in sweep.LOCAL_ONLY_ENV]
+
+    # Ray's processes send HTTP to a closed loopback port; the driver's environment is restored.
+    assert local_ray.get(local_ray.remote(proxies).remote()) == list(sweep.LOCAL_ONLY_ENV.values())
+    assert os.environ.get('https_proxy') != sweep.LOCAL_ONLY_ENV['https_proxy']
     spec = _write_spec(tmp_path / 'equal.yaml', [
         {'agents': ['random', 'oracle'],
          'envs': ['GrowSpace/Control-Hard-v0', 'GrowSpace/Fairness-Easy-v0']}],
@@ -98,8 +108,8 @@ def test_failing_trial_is_reported_with_its_error_and_the_others_finish(
     error = trials['dense-control-easy-s0']['error']
     assert error.startswith('ValueError: light_density must be in [1, 100000], got 0')
     assert f'trial dense-control-easy-s0 failed: {error}' in capsys.readouterr().err
-    assert [(r['agent'], r['episodes']) for r in _read_csv(tmp_path / 'out' / 'results.csv')] \
-        == [('random', '4')]
+    assert [(r['agent'], r['runs'], r['episodes'])
+            for r in _read_csv(tmp_path / 'out' / 'results.csv')] == [('random', '2', '4')]
 
 
 def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path, local_ray):
@@ -111,18 +121,21 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     env = child_env()
     env['TUNE_GLOBAL_CHECKPOINT_S'] = '0'  # Tune saves its state at every step
     env.pop('RAY_ADDRESS', None)
-    child = subprocess.Popen(
-        [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
-         '--workers', '1', '--quiet', '--no-plots'],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _wait_for(lambda: _finished(out), 3, child)
-    child.send_signal(signal.SIGKILL)
-    child.wait(timeout=30)
+    with open(tmp_path / 'killed.log', 'w') as log:
+        child = subprocess.Popen(
+            [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
+             '--workers', '1', '--quiet', '--no-plots'],
+            env=env, stdout=log, stderr=subprocess.STDOUT)
+        _wait_for(lambda: _finished(out), 3, child, tmp_path / 'killed.log')
+        killed = time.time()
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
     finished = _finished(out)  # one more may have finished before the signal landed
     assert 3 <= len(finished) < n, 'the sweep was not killed mid-way'
+    assert all(len(runs) == 1 for runs in finished.values())
     # One trial at a time: a trial starts only after Tune saved the previous one as finished,
     # so every finished trial but the newest one is on record.
-    newest = max(finished, key=lambda k: finished[k]['started'])
+    newest = max(finished, key=lambda k: finished[k][0]['started'])
     on_record = {k: v for k, v in finished.items() if k != newest}
 
     assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
@@ -130,36 +143,34 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
 
     after = _finished(out)
     assert len(after) == n
-    for key, summary in on_record.items():
-        assert after[key] == summary, f'{key} ran again'
-    reran = [k for k in after if k not in on_record]
-    assert len(reran) >= n - len(finished)
-    for key in after:  # one execution (one reported result) per trial
-        lines = (out / 'tune' / key / 'result.json').read_text().splitlines()
-        assert len(lines) == 1, key
+    for key, runs in on_record.items():  # still the one execution of the first sweep
+        assert after[key] == runs, f'{key} ran again'
+    for key in after.keys() - finished.keys():  # run by the second sweep, not a leftover
+        assert [datetime.fromisoformat(r['started']).timestamp() > killed
+                for r in after[key]] == [True], key
     assert {t['status'] for t in _read_csv(out / 'trials.csv')} == {'ok'}
 
 
-def _finished(out: Path) -> dict[str, dict]:
-    """trial.json of every trial whose checkpoint Ray Tune has written, by trial key."""
-    found = {}
-    for path in (out / 'tune').glob('*/checkpoint_*/trial.json'):
+def _finished(out: Path) -> dict[str, list[dict]]:
+    """Per trial key, the trial.json of each checkpoint Tune wrote: one per execution."""
+    found: dict[str, list[dict]] = {}
+    for path in sorted((out / 'tune').glob('*/checkpoint_*/trial.json')):
         try:
-            found[path.parent.parent.name] = json.loads(path.read_text())
+            found.setdefault(path.parent.parent.name, []).append(json.loads(path.read_text()))
         except ValueError:  # being written
             continue
     return found
 
 
-def _wait_for(check, count: int, child: subprocess.Popen, timeout: float = 180.0) -> dict:
+def _wait_for(check, count: int, child: subprocess.Popen, log: Path,
+              timeout: float = 180.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        found = check()
-        if len(found) >= count:
-            return found
+        if len(check()) >= count:
+            return
         if child.poll() is not None:
             pytest.fail(f'the sweep exited early ({child.returncode}): '
-                        f'{child.stderr.read().decode()[-2000:]}')
+                        f'{log.read_text()[-2000:]}')
         time.sleep(0.1)
     child.kill()
     pytest.fail(f'fewer than {count} trials finished in {timeout} s')
@@ -188,3 +199,39 @@ def test_bad_spec_names_the_field_the_value_and_what_is_allowed(change, message)
     with pytest.raises(sweep.SpecError) as error:
         sweep.parse_spec(data)
     assert message in str(error.value)
+
+
+def test_shipped_specs_expand_to_their_trials():
+    root = Path(__file__).resolve().parent.parent / 'config' / 'sweeps'
+    reference = sweep.load_spec(root / 'reference_agents.yaml')
+    assert len(reference.trials) == 8 * 5 + 8  # the oracle is deterministic: one seed
+    if importlib.util.find_spec('stable_baselines3') is None:
+        with pytest.raises(sweep.SpecError, match='need the learn extra'):
+            sweep.load_spec(root / 'case_studies.yaml')
+        return
+    cases = sweep.load_spec(root / 'case_studies.yaml')
+    learners = [t for t in cases.trials if t.agent in sweep.LEARNERS]
+    assert len(learners) == 3 + 8 * 2 + 2 + 3
+    curriculum = [t for t in learners if t.env == 'GrowSpace/Shape-Curriculum-v0']
+    assert [(t.n_envs, t.hp, t.env_kwargs) for t in curriculum] == \
+        [(8, {'n_steps': 256, 'batch_size': 64}, {'episodes_per_stage': 12})] * 2
+
+
+def test_training_sweep_trains_evaluates_and_plots(tmp_path, local_ray):
+    pytest.importorskip('stable_baselines3', reason='needs requirements-learn.txt')
+    from growspace_sim.learn import train  # noqa: PLC0415
+    assert sorted(sweep.LEARNERS) == sorted(train.ALGOS)
+    spec = _write_spec(tmp_path / 'train.yaml', [
+        {'agents': ['ppo'], 'envs': ['GrowSpace/Control-Hard-v0'], 'seeds': 2, 'steps': 256,
+         'n_envs': 2, 'hp': {'n_steps': 64, 'batch_size': 32, 'n_epochs': 1}},
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Hard-v0']}], episodes=3)
+
+    assert sweep.main([str(spec), '--out', str(tmp_path / 'out'), '--workers', '2',
+                       '--quiet']) == 0
+
+    rows = {r['agent']: r for r in _read_csv(tmp_path / 'out' / 'results.csv')}
+    assert (rows['ppo']['runs'], rows['ppo']['steps']) == ('2', '256')
+    run = tmp_path / 'out' / 'trials' / 'ppo-control-hard-s1' / 'run'
+    assert json.loads((run / 'run.json').read_text())['seed'] == 1
+    assert (run / 'model.zip').exists() and (run / 'episodes.csv').exists()
+    assert (tmp_path / 'out' / 'training.png').stat().st_size > 0

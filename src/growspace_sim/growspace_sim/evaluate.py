@@ -94,11 +94,12 @@ def evaluate(challenge: str, setting: str, episodes: int, seed: int = 0) -> Row:
     name = env_id(challenge, setting)
     random_runs = play_agent(name, 'random', episodes, seed)
     oracle_runs = play_agent(name, 'oracle', episodes, seed)
-    return Row(challenge, setting, episodes, *_mean_se(random_runs.returns),
-               *_mean_se(oracle_runs.returns), float(oracle_runs.success.mean()))
+    return Row(challenge, setting, episodes, *mean_se(random_runs.returns),
+               *mean_se(oracle_runs.returns), float(oracle_runs.success.mean()))
 
 
-def _mean_se(values: np.ndarray) -> tuple[float, float]:
+def mean_se(values: np.ndarray) -> tuple[float, float]:
+    """Mean and standard error of the mean (NaN for fewer than two values)."""
     array = np.asarray(values, np.float64)
     se = array.std(ddof=1) / math.sqrt(array.size) if array.size > 1 else float('nan')
     return float(array.mean()), float(se)

@@ -36,14 +36,16 @@ Usage::
         --episodes 20 --name quick
     growspace-sweep SPEC --address HEAD_IP:6379 --storage /shared/sweeps     # a Ray cluster
 
-Ray: a local instance bound to 127.0.0.1 (no dashboard, no usage stats) unless ``--address`` or
-``RAY_ADDRESS`` names a cluster. Run the same command again after an interruption: finished
-trials are kept, the others run (``--retry-errored`` also reruns failed ones).
+Ray: a local instance bound to 127.0.0.1 (no dashboard, no usage stats, nothing sent beyond
+loopback; see ``connect``) unless ``--address`` or ``RAY_ADDRESS`` names a cluster. Run the
+same command again after an interruption: finished trials are kept, the others run
+(``--retry-errored`` also reruns failed ones).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import importlib.util
 import json
@@ -55,9 +57,10 @@ import socket
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -74,6 +77,15 @@ GROUP_KEYS = ('agents', 'envs', 'seeds', 'steps', 'hp', 'n_envs', 'max_minutes',
               'env_kwargs', 'label')
 LEARNER_KEYS = ('steps', 'hp', 'n_envs', 'max_minutes', 'device')
 LOOPBACK = '127.0.0.1'
+# Ray 2.60 starts a minimal dashboard process even without the dashboard, and its usage module
+# asks the cloud metadata addresses (169.254.169.254, metadata.google.internal) which cloud it
+# runs on, whatever RAY_USAGE_STATS_ENABLED says. That HTTP client honours the proxy variables:
+# the local instance's processes send it to a closed loopback port (no DNS query, no packet
+# leaves), while Ray's own gRPC and HTTP to 127.0.0.1 stay direct.
+_NO_PROXY = f'{LOOPBACK},localhost,::1'
+LOCAL_ONLY_ENV = {name: value for names, value in (
+    (('http_proxy', 'https_proxy', 'HTTP_PROXY', 'HTTPS_PROXY'), f'http://{LOOPBACK}:9'),
+    (('no_proxy', 'NO_PROXY'), _NO_PROXY)) for name in names}
 TRIAL_COLUMNS = ('key', 'agent', 'env', 'seed', 'status', 'mean', 'se', 'wall_s', 'error')
 
 
@@ -307,7 +319,7 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     else:
         rewards, eval_env, label, steps = _train_and_evaluate(trial, out / 'run')
     returns = rewards.sum(axis=1)
-    mean, se = evaluate._mean_se(returns)
+    mean, se = evaluate.mean_se(returns)
     wall = time.perf_counter() - start
     np.save(out / 'rewards.npy', rewards)
     with open(out / 'evaluation.csv', 'w', newline='') as f:
@@ -319,8 +331,7 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     summary = dict(trial=asdict(trial), key=trial.key, label=trial.label or label,
                    eval_env=eval_env, steps=steps, mean=mean, se=se, wall_s=round(wall, 3),
                    host=socket.gethostname(), pid=os.getpid(),
-                   started=time.strftime('%Y-%m-%dT%H:%M:%S', time.gmtime(started))
-                   + f'.{int(started % 1 * 1e6):06d}Z')
+                   started=datetime.fromtimestamp(started, timezone.utc).isoformat())
     (out / 'trial.json').write_text(json.dumps(summary, indent=2) + '\n')
     return {'mean': mean, 'se': se, 'wall_s': wall}
 
@@ -378,8 +389,24 @@ def connect(address: str | None, workers: int | None) -> None:
         raise RuntimeError('ray was imported before growspace_sim.sweep.connect(), so a local '
                            'Ray would not stay on 127.0.0.1; set '
                            'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 before importing ray.')
-    ray.init(address='local', num_cpus=workers, include_dashboard=False,
-             _node_ip_address=LOOPBACK, log_to_driver=False)
+    with _environ(LOCAL_ONLY_ENV):
+        ray.init(address='local', num_cpus=workers, include_dashboard=False,
+                 _node_ip_address=LOOPBACK, log_to_driver=False)
+
+
+@contextlib.contextmanager
+def _environ(values: Mapping[str, str]) -> Iterator[None]:
+    """Set environment variables for the processes started inside the block."""
+    saved = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
@@ -392,7 +419,8 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
         spec: The experiment.
         out: Local folder of the experiment's results (``spec.json``, ``trials/<key>/``).
         storage: Ray Tune's storage (a path every node sees, or a URI); default ``out``.
-        workers: Trials at once at most (default: as many as the resources allow).
+        workers: Trials at once at most (default: as many as the resources allow). A
+            resumed experiment keeps its first run's ``workers`` and ``reuse_actors``.
         cpus_per_trial: CPUs Ray reserves for each trial.
         gpus_per_trial: GPUs Ray reserves for each trial.
         retry_errored: On a resumed experiment, run the failed trials again.
@@ -423,12 +451,15 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
     trainable = tune.with_resources(
         tune.with_parameters(_tune_trial, trials={k: asdict(t) for k, t in by_key.items()}),
         {'cpu': cpus_per_trial, 'gpu': gpus_per_trial})
+    # Given again on restore: Tune creates the trials it had not created yet from it.
+    param_space = {'trial': tune.grid_search(list(by_key))}
     if tune.Tuner.can_restore(path):
-        tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored)
+        tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored,
+                                   param_space=param_space)
     else:
         tuner = tune.Tuner(
             trainable,
-            param_space={'trial': tune.grid_search(list(by_key))},
+            param_space=param_space,
             tune_config=tune.TuneConfig(max_concurrent_trials=workers,
                                         reuse_actors=reuse_actors,
                                         trial_name_creator=_trial_key,
@@ -495,6 +526,9 @@ def summarise(outcomes: list[Outcome], out: str | os.PathLike,
                 str(o.files / 'run'))
     rows = [row for env_id, results in curves.items()
             for row in evaluate_policies.rows_for(env_id, results)]
+    # rows_for counts trained runs; a random agent's seeds are pooled the same way.
+    rows = [replace(r, runs=len(curves[r.env][r.agent]['rewards']))
+            if r.agent in BASELINES else r for r in rows]
     evaluate_policies.write_csv(rows, out / 'results.csv')
     (out / 'results.md').write_text(evaluate_policies.markdown(rows) + '\n')
     np.savez_compressed(out / 'rewards.npz', **{

@@ -44,7 +44,7 @@ class Row:
     case: str       # e.g. control/easy
     env: str        # the id the episodes were played on
     agent: str      # random, oracle, or the run label (algo, or algo + training env)
-    runs: int       # trained runs (seeds) pooled in this row; 0 for random and oracle
+    runs: int       # trained runs (seeds) pooled in this row; 0 or the seeds of a baseline
     episodes: int   # episode seeds, the same for every agent and run
     steps: int      # mean training steps of the pooled runs
     mean: float     # mean undiscounted episode return
@@ -133,7 +133,7 @@ def markdown(rows: list[Row]) -> str:
     lines = ['| case | agent | runs (seeds) | training steps | episodes | return (mean ± s.e.) |',
              '|---|---|---|---|---|---|']
     for r in rows:
-        steps = f'{r.steps:,}' if r.runs else '-'
+        steps = f'{r.steps:,}' if r.steps else '-'
         lines.append(f'| {r.case} | {r.agent} | {r.runs or "-"} | {steps} | {r.episodes} '
                      f'| {r.mean:.2f} ± {r.se:.2f} |')
     return '\n'.join(lines)
