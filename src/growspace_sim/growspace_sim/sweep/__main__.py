@@ -1,0 +1,7 @@
+"""``python -m growspace_sim.sweep``: the ``growspace-sweep`` command."""
+
+import sys
+
+from growspace_sim.sweep.cli import main
+
+sys.exit(main())
