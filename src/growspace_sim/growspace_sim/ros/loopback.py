@@ -1,7 +1,8 @@
 """The network rule: ROS processes we start talk only on this host unless the user chose otherwise.
 
-Two settings together, each applied only where the user set nothing (measured in
-shared/design/ros2-pypi.md: either one alone already sent no packet to a LAN interface):
+Two settings together, each applied only where the user set nothing (either one alone was
+measured to send no packet to a LAN interface beside loopback, so together they are belt and
+braces):
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (rcl, Jazzy) and a Fast DDS profile
 (``FASTRTPS_DEFAULT_PROFILES_FILE``) whose only transports are UDP on 127.0.0.1 and shared memory.
 Both are read when the first ROS context of a process starts, so call ``confine`` before

@@ -1,7 +1,8 @@
 """What the built-in challenges share: layout draws, the two rewards, oracle steering.
 
-Layouts follow the paper (section 'Tasks') and MISSION.md's table. Every random draw goes through
-the episode's ``np.random.Generator``, in a fixed order, so an episode is a function of its seed.
+Layouts follow the paper (section 'Tasks') and the README's challenge table. Every random draw
+goes through the episode's ``np.random.Generator``, in a fixed order, so an episode is a
+function of its seed.
 """
 
 from __future__ import annotations
