@@ -63,6 +63,15 @@ def test_teleop_follows_step_ids_mode_and_light_kind() -> None:
         transport.inject_raw('light/command', cdr)
         relay()
     assert teleop.last_step_id == 3 and teleop.last_result.step == 3
+    for key in (curses.KEY_LEFT, curses.KEY_LEFT):  # a held key: sent before any answer
+        assert teleop.press(key)
+    ids = [m.step_id for m, _ in transport.published[transport.resolve('light/command')][-2:]]
+    assert ids == [4, 5]
+    for _, cdr in transport.published[transport.resolve('light/command')][-2:]:
+        transport.inject_raw('light/command', cdr)
+    relay()
+    assert teleop.last_step_id == 5 and teleop.last_result.step == 5 and not \
+        teleop.last_result.info
     assert teleop.press('r')
     msg, cdr = transport.published[transport.resolve('reset')][-1]
     transport.inject_raw('reset', cdr)

@@ -70,7 +70,10 @@ class Teleop:
 
     def _on_result(self, msg: Any, _: bytes) -> None:
         self.last_result = msg
-        self.last_step_id = int(msg.step_id)
+        if int(msg.step) == 0 and not msg.info:  # a new episode: the node counts from 1 again
+            self.last_step_id = int(msg.step_id)
+        else:  # never below an id already sent: a held key outruns the answers
+            self.last_step_id = max(self.last_step_id, int(msg.step_id))
 
     def _on_light(self, msg: Any, _: bytes) -> None:
         self.spot = int(msg.mode) == convert.MODE_SPOT
@@ -93,6 +96,7 @@ class Teleop:
             self.status = 'reset sent'
         elif command is not None:
             step_id = self.last_step_id + 1 if self.mode == 'lockstep' else 0
+            self.last_step_id = max(self.last_step_id, step_id)
             self.send_command(types.new(types.LIGHT_COMMAND, step_id=step_id,
                                         mode=convert.MODE_DISCRETE, action=command))
             names = SPOT_ACTIONS if self.spot else BEAM_ACTIONS

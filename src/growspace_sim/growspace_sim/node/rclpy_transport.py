@@ -94,7 +94,7 @@ class RclpyTransport:
                  args: Sequence[str] | None = None, *, domain_id: int | None = None,
                  automatic_overrides: bool = False) -> None:
         # A lockstep step is a chain of small writes: publishing in the caller's thread saves a
-        # hand-over per message (1,300 -> 1,750 round trips/s, scripts/bench_node.py).
+        # hand-over per message (1,300 -> 1,900 round trips/s, scripts/bench_node.py).
         os.environ.setdefault(PUBLICATION_MODE_VAR, 'SYNCHRONOUS')
         import rclpy
         from rclpy.context import Context
