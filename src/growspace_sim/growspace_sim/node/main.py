@@ -58,11 +58,9 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         try:
             values, unknown = transport.declare_parameters(params.specs(), params.check_type)
             if unknown:
-                transport.logger.info(
-                    f'ignored unknown parameter(s) {unknown}: not parameters of sim_node '
-                    f'(a typo?); see config/growspace.yaml for the list.')
-                print(f'sim_node: warning: ignored unknown parameter(s) {unknown}',
-                      file=sys.stderr)
+                transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
+                                      f'{unknown}: not parameters of sim_node (a typo?); '
+                                      f'config/growspace.yaml lists them all.')
             cfg, node_params = params.build(values)
             recorder = make_recorder(node_params.record_path)
         except ParamError as e:
