@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from bench_common import cpu_seconds, sim_node_executable
+from bench_common import cpu_seconds
 
 ROOT = Path(__file__).resolve().parents[1]
 EPISODE = 50
@@ -104,7 +104,9 @@ class Client:
 
 def over_ros(episodes: int, repeats: int, seed: int) -> tuple[list[float], float, float]:
     """Steps/s of each repeat, and node and client CPU per step [s]."""
-    node = subprocess.Popen([sim_node_executable(), '--ros-args', '-r', '__ns:=/bench',
+    from growspace_sim.node.main import installed_executable
+
+    node = subprocess.Popen([installed_executable(), '--ros-args', '-r', '__ns:=/bench',
                              '-p', f'seed:={seed}'], stderr=subprocess.DEVNULL)
     rates = []
     try:

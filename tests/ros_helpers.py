@@ -6,11 +6,9 @@ user's node would, so these tests check our node against rclpy itself, not again
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from typing import Any, Callable
 
@@ -24,38 +22,44 @@ from rclpy.signals import SignalHandlerOptions
 from growspace_msgs.msg import LightCommand, ResetRequest, StepResult
 from sensor_msgs.msg import Image
 
+from growspace_sim.node.main import installed_executable as sim_node_executable
+
 TIMEOUT_S = 20.0
 COMMANDS = QoSProfile(depth=100)
 OBSERVATIONS = QoSProfile(depth=10)
 
 
-def sim_node_executable() -> str:
-    """What ``ros2 run growspace_sim sim_node`` starts: the colcon-installed executable."""
-    prefix = os.environ.get('COLCON_PREFIX_PATH', '').split(os.pathsep)[0] or 'install'
-    exe = Path(prefix) / 'growspace_sim' / 'lib' / 'growspace_sim' / 'sim_node'
-    return str(exe) if exe.exists() else (shutil.which('sim_node') or str(exe))
-
-
 class NodeProcess:
-    """``sim_node`` as a child process (its stdout and stderr kept); always killed at the end."""
+    """``sim_node`` as a child process; always killed at the end.
+
+    Its output goes to a file, not a pipe: nobody reads a pipe while the node runs, and a chatty
+    node would block once the pipe is full.
+    """
 
     def __init__(self, *ros_args: str, namespace: str | None = '/gs_test') -> None:
         remap = ['-r', f'__ns:={namespace}'] if namespace else []
         self.argv = [sim_node_executable(), '--ros-args', *remap, *ros_args]
-        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True)
+        self._out = tempfile.TemporaryFile('w+')  # closed in stop()
+        self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=subprocess.STDOUT,
+                                     text=True)
+
+    def output(self) -> str:
+        """Everything the node wrote so far (stdout and stderr)."""
+        self._out.seek(0)
+        return self._out.read()
 
     def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
         """Send ``sig``, wait; returns the exit status and everything the node logged."""
         try:
             if self.proc.poll() is None:
                 self.proc.send_signal(sig)
-            out, err = self.proc.communicate(timeout=TIMEOUT_S)
-            return self.proc.returncode, out + err
+            self.proc.wait(timeout=TIMEOUT_S)
+            return self.proc.returncode, self.output()
         finally:
             if self.proc.poll() is None:
                 self.proc.kill()
                 self.proc.wait()
+            self._out.close()
 
 
 class Client:

@@ -99,39 +99,11 @@ def step(client: Client, reset_id: int, step_id: int, action: int) -> StepResult
     return client.wait_result(lambda m: m.reset_id == reset_id and m.step_id == step_id)
 
 
-class LoggedNode(NodeProcess):
-    """``NodeProcess`` with its output in files, so a chatty node never blocks on a pipe."""
-
-    def __init__(self, tmp_path: Any, *ros_args: str,
-                 namespace: str | None = NAMESPACE) -> None:
-        remap = ['-r', f'__ns:={namespace}'] if namespace else []
-        self.argv = [sim_node_executable(), '--ros-args', *remap, *ros_args]
-        self.out_path = tmp_path / f'node_{secrets.token_hex(3)}.log'
-        self._out = open(self.out_path, 'w+')  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=subprocess.STDOUT,
-                                     text=True)
-
-    def output(self) -> str:
-        return self.out_path.read_text()
-
-    def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
-        try:
-            if self.proc.poll() is None:
-                self.proc.send_signal(sig)
-            self.proc.wait(timeout=TIMEOUT_S)
-            return self.proc.returncode, self.output()
-        finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait()
-            self._out.close()
-
-
 @pytest.fixture(scope='module')
-def node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LoggedNode]:
+def node() -> Iterator[NodeProcess]:
     """One lockstep node for the module: short episodes, seed 1."""
-    process = LoggedNode(tmp_path_factory.mktemp('node'), '-p', f'seed:={SEED}',
-                         '-p', f'episode_length:={EPISODE}')
+    process = NodeProcess('-p', f'seed:={SEED}', '-p', f'episode_length:={EPISODE}',
+                          namespace=NAMESPACE)
     try:
         yield process
     finally:
@@ -140,7 +112,7 @@ def node(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LoggedNode]:
 
 
 @pytest.fixture(scope='module')
-def client(node: LoggedNode) -> Iterator[Client]:
+def client(node: NodeProcess) -> Iterator[Client]:
     c = Client(NAMESPACE)
     try:
         c.connect()
@@ -386,10 +358,10 @@ def test_set_read_only_parameter_is_refused(client: Client, name: str,
 
 
 # ----------------------------------------------------------------------------- 3. realtime
-def test_realtime_mode_steps_at_rate_hz(tmp_path: Any) -> None:
+def test_realtime_mode_steps_at_rate_hz() -> None:
     ns = f'{NAMESPACE}_rt'
-    process = LoggedNode(tmp_path, '-p', 'mode:=realtime', '-p', 'rate_hz:=50.0',
-                         '-p', 'episode_length:=1000', namespace=ns)
+    process = NodeProcess('-p', 'mode:=realtime', '-p', 'rate_hz:=50.0',
+                          '-p', 'episode_length:=1000', namespace=ns)
     client = Client(ns)
     try:
         client.connect()
@@ -412,15 +384,15 @@ def test_realtime_mode_steps_at_rate_hz(tmp_path: Any) -> None:
 
 # ----------------------------------------------------------------------------- 6. command line
 @pytest.fixture(scope='module')
-def remapped(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[LoggedNode, str]]:
+def remapped(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[NodeProcess, str]]:
     """A node started with a namespace, a node name, a topic remap, a params file and -p."""
     tmp = tmp_path_factory.mktemp('cli')
     params_file = tmp / 'params.yaml'
     params_file.write_text('/**:\n  ros__parameters:\n    light_density: 100\n')
     ns = f'/x_{secrets.token_hex(3)}'
-    process = LoggedNode(tmp, '-r', '__node:=other_name', '-r', 'step_result:=results',
-                         '--params-file', str(params_file), '-p', 'episode_length:=7',
-                         '-p', 'rate_hz:=20', '-p', 'bogus_param:=1', namespace=ns)
+    process = NodeProcess('-r', '__node:=other_name', '-r', 'step_result:=results',
+                          '--params-file', str(params_file), '-p', 'episode_length:=7',
+                          '-p', 'rate_hz:=20', '-p', 'bogus_param:=1', namespace=ns)
     try:
         yield process, ns
     finally:
@@ -429,7 +401,7 @@ def remapped(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[LoggedN
 
 
 @pytest.fixture(scope='module')
-def remapped_client(remapped: tuple[LoggedNode, str]) -> Iterator[Client]:
+def remapped_client(remapped: tuple[NodeProcess, str]) -> Iterator[Client]:
     _, ns = remapped
     c = Client(ns)
     results: list[StepResult] = []
@@ -446,7 +418,7 @@ def remapped_client(remapped: tuple[LoggedNode, str]) -> Iterator[Client]:
         c.close()
 
 
-def test_node_name_and_namespace_remaps(remapped: tuple[LoggedNode, str],
+def test_node_name_and_namespace_remaps(remapped: tuple[NodeProcess, str],
                                         remapped_client: Client) -> None:
     _, ns = remapped
     graph = remapped_client.node.get_node_names_and_namespaces()
@@ -454,7 +426,7 @@ def test_node_name_and_namespace_remaps(remapped: tuple[LoggedNode, str],
     assert (NODE, ns) not in graph
 
 
-def test_topic_remap_moves_step_results(remapped: tuple[LoggedNode, str],
+def test_topic_remap_moves_step_results(remapped: tuple[NodeProcess, str],
                                         remapped_client: Client) -> None:
     _, ns = remapped
     topics = dict(remapped_client.node.get_topic_names_and_types())
@@ -469,7 +441,7 @@ def test_topic_remap_moves_step_results(remapped: tuple[LoggedNode, str],
                                                   for r in results))
 
 
-def test_params_file_and_overrides_reach_the_node(remapped: tuple[LoggedNode, str],
+def test_params_file_and_overrides_reach_the_node(remapped: tuple[NodeProcess, str],
                                                   remapped_client: Client) -> None:
     _, ns = remapped
     values = get_params(remapped_client, ['light_density', 'episode_length', 'rate_hz'],
@@ -480,7 +452,7 @@ def test_params_file_and_overrides_reach_the_node(remapped: tuple[LoggedNode, st
     assert values[2].double_value == 20.0
 
 
-def test_unknown_parameter_is_warned_about_by_name(remapped: tuple[LoggedNode, str],
+def test_unknown_parameter_is_warned_about_by_name(remapped: tuple[NodeProcess, str],
                                                    remapped_client: Client) -> None:
     process, _ = remapped
     assert process.proc.poll() is None, process.output()[-2000:]
@@ -505,8 +477,7 @@ def test_recording_is_finished_by_a_signal_and_resimulates(tmp_path: Any, sig: i
 
     path = tmp_path / 'run.mcap'
     ns = f'{NAMESPACE}_rec_{int(sig)}'
-    process = LoggedNode(tmp_path, '-p', f'record_path:={path}', '-p', 'seed:=4',
-                         namespace=ns)
+    process = NodeProcess('-p', f'record_path:={path}', '-p', 'seed:=4', namespace=ns)
     client = Client(ns)
     try:
         client.connect()

@@ -14,6 +14,7 @@ before rclpy is up (imports, start-up) ends the node as soon as it would start s
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import sys
 import threading
@@ -46,6 +47,13 @@ def make_recorder(path: str) -> Recorder | None:
         raise ParamError(f'record_path = {path!r} cannot be written: {e}') from None
 
 
+def installed_executable() -> str:
+    """The colcon-installed ``sim_node``: what ``ros2 run growspace_sim sim_node`` starts."""
+    from ament_index_python.packages import get_package_prefix
+
+    return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim', 'sim_node')
+
+
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the node until the context shuts down (SIGINT, SIGTERM) or ``stop`` is set."""
     from growspace_sim.node.rclpy_transport import RclpyTransport
@@ -66,9 +74,9 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         except ParamError as e:
             print(f'sim_node: invalid parameter: {e}', file=sys.stderr)
             return EXIT_BAD_PARAM
-        shown = transport  # the challenge parameters follow what a reset switched to
-        node = ChamberNode(transport, cfg, node_params, recorder, on_reconfigure=lambda c: (
-            shown.show_parameters({'challenge': c.challenge, 'setting': c.setting})))
+        show = transport.show_parameters  # the challenge parameters follow a reset's switch
+        node = ChamberNode(transport, cfg, node_params, recorder, on_reconfigure=lambda c: show(
+            {'challenge': c.challenge, 'setting': c.setting}))
         transport.on_parameter_change(node.propose)
         transport.logger.info(
             f'sim_node {transport.resolve("~")}: {node_params.mode} mode, seed {node.seed}'

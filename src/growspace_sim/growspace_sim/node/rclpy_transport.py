@@ -132,9 +132,7 @@ class RclpyTransport:
         return name
 
     def publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> PublishFn:
-        pub = self.node.create_publisher(interface_class(typename), topic, to_rclpy_qos(qos))
-        self._publishers[self.resolve(topic)] = pub
-        serialize, write = types.serialize, pub.publish
+        serialize, write = types.serialize, self.raw_publisher(typename, topic, qos)
 
         def publish(msg: Any) -> bytes:
             cdr = serialize(msg, typename)
