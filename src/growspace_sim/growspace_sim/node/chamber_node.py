@@ -41,7 +41,30 @@ RESET_SRV = 'growspace_msgs/srv/Reset'
 EPISODE_OVER = 'episode over; send a reset'
 
 
-def _apply(sim: Simulation, msg: Any) -> None:
+def step_id_error(step_id: int, last_step_id: int, log: Any) -> str:
+    """The lockstep rule for a command's step_id (ids rise within an episode, from 1).
+
+    Returns:
+        '' if the command may step, else the error text for its StepResult (also logged,
+        throttled). A gap in the ids is allowed, with a warning.
+    """
+    if step_id == 0 or step_id <= last_step_id:
+        # Answered, so a client never waits in vain.
+        kind = 'zero' if step_id == 0 else 'stale'
+        error = (f'step_id = {step_id} is not allowed in lockstep mode' if step_id == 0 else
+                 f'step_id = {step_id} is a duplicate or late command') + (
+            f'; expected step_id > {last_step_id} (the last processed since the reset)'
+            f', or mode:=realtime.')
+        log.warn(f'command:step_id:{kind}', f'light/command: dropped: {error}')
+        return f'error: {error}'
+    if step_id > last_step_id + 1 and last_step_id:
+        log.warn('command:gap', f'light/command: step_ids {last_step_id + 1}..{step_id - 1} '
+                 f'never arrived (lost, or skipped by the client); stepping {step_id}.')
+    return ''
+
+
+def apply_command(sim: Simulation, msg: Any) -> None:
+    """``convert.apply_command`` without numpy's warnings about NaN in a float32 action."""
     # NaN/inf in a float32 action are rejected by apply_command; numpy's cast warning is noise.
     with np.errstate(invalid='ignore', over='ignore'):
         convert.apply_command(sim, msg)
@@ -192,20 +215,10 @@ class ChamberNode:
 
     def _lockstep(self, msg: Any) -> None:
         step_id = int(msg.step_id)
-        if step_id == 0 or step_id <= self.last_step_id:
-            # Answered, so a client never waits in vain; ids must rise within an episode.
-            kind = 'zero' if step_id == 0 else 'stale'
-            error = (f'step_id = {step_id} is not allowed in lockstep mode' if step_id == 0 else
-                     f'step_id = {step_id} is a duplicate or late command') + (
-                f'; expected step_id > {self.last_step_id} (the last processed since the reset)'
-                f', or mode:=realtime.')
-            self.log.warn(f'command:step_id:{kind}', f'light/command: dropped: {error}')
-            self._publish_result(step_id, self.reset_id, info=f'error: {error}')
+        error = step_id_error(step_id, self.last_step_id, self.log)
+        if error:
+            self._publish_result(step_id, self.reset_id, info=error)
             return
-        if step_id > self.last_step_id + 1 and self.last_step_id:
-            self.log.warn('command:gap', f'light/command: step_ids {self.last_step_id + 1}..'
-                          f'{step_id - 1} never arrived (lost, or skipped by the client); '
-                          f'stepping {step_id}.')
         self.last_step_id = step_id
         if self.episode_over:
             self.log.warn('command:episode', f'light/command: step_id {step_id} not stepped: '
@@ -232,7 +245,7 @@ class ChamberNode:
         """Apply a LightCommand; if it is bad, warn (throttled per field) and return the error
         text for the StepResult, else ''."""
         try:
-            _apply(self.sim, msg)
+            apply_command(self.sim, msg)
         except CommandError as e:
             self.log.warn(f'command:{e.field}', f'light/command: {consequence}: {e}')
             return f'error: {e}'

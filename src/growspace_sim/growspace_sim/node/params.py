@@ -95,15 +95,21 @@ def _field_comments(cls: type) -> dict[str, str]:
     return found
 
 
-@functools.cache
-def specs() -> tuple[ParamSpec, ...]:
-    """Every parameter of the node: SimConfig fields first, then NodeParams, in field order."""
+def specs_of(*classes: type) -> tuple[ParamSpec, ...]:
+    """The parameters of some dataclasses, in class and field order (the gantry node adds its
+    own settings class to SimConfig this way)."""
     out = []
-    for cls in (SimConfig, NodeParams):
+    for cls in classes:
         comments = _field_comments(cls)
         for field in dataclasses.fields(cls):
             out.append(ParamSpec(field.name, field.default, comments.get(field.name, ''), cls))
     return tuple(out)
+
+
+@functools.cache
+def specs() -> tuple[ParamSpec, ...]:
+    """Every parameter of the node: SimConfig fields first, then NodeParams, in field order."""
+    return specs_of(SimConfig, NodeParams)
 
 
 def defaults() -> dict[str, Any]:
@@ -139,11 +145,12 @@ def check_type(spec: ParamSpec, value: Any) -> Any:
     return value
 
 
-def build(values: dict[str, Any]) -> tuple[SimConfig, NodeParams]:
+def build(values: dict[str, Any], settings: type = NodeParams) -> tuple[SimConfig, Any]:
     """Validate parameter values (missing ones get their defaults).
 
     Args:
         values: parameter name -> value as parsed from YAML or declared in rclpy.
+        settings: the node's own settings dataclass (``NodeParams`` for sim_node).
 
     Returns:
         The chamber configuration and the node settings.
@@ -151,7 +158,8 @@ def build(values: dict[str, Any]) -> tuple[SimConfig, NodeParams]:
     Raises:
         ParamError: one line naming the parameter, its value and what is allowed.
     """
-    by_name = {s.name: s for s in specs()}
+    by_name = {s.name: s for s in (specs() if settings is NodeParams else
+                                   specs_of(SimConfig, settings))}
     unknown = sorted(set(values) - set(by_name))
     if unknown:
         raise ParamError(f'unknown parameter(s) {unknown}; allowed: {sorted(by_name)}.')
@@ -163,7 +171,7 @@ def build(values: dict[str, Any]) -> tuple[SimConfig, NodeParams]:
         target[name] = check_type(spec, value)
     try:
         cfg = SimConfig.from_dict(sim_values)
-        node = NodeParams(**node_values)
+        node = settings(**node_values)
     except ValueError as e:
         raise ParamError(str(e)) from None
     return cfg, node

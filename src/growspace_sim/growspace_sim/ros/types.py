@@ -35,6 +35,13 @@ STEP_RESULT = 'growspace_msgs/msg/StepResult'
 RESET_SRV_REQUEST = 'growspace_msgs/srv/Reset_Request'
 RESET_SRV_RESPONSE = 'growspace_msgs/srv/Reset_Response'
 
+# Standard services our nodes offer that rosbags' Jazzy store lacks (std_srvs/srv/Trigger.srv;
+# an empty request is the one-byte placeholder struct rosidl generates).
+STANDARD_SERVICES = {
+    'std_srvs/srv/Trigger_Request': 'uint8 structure_needs_at_least_one_member',
+    'std_srvs/srv/Trigger_Response': 'bool success\nstring message',
+}
+
 # CDR encapsulation header of XCDR1 little endian, the only form ROS 2 rmw layers write.
 CDR_LE_HEADER = b'\x00\x01\x00\x00'
 
@@ -146,7 +153,7 @@ def typestore() -> Typestore:
         The typestore, built on first use.
     """
     store = get_typestore(Stores.ROS2_JAZZY)
-    store.register(parse_definitions(interface_texts()))
+    store.register(parse_definitions({**interface_texts(), **STANDARD_SERVICES}))
     return store
 
 

@@ -1,0 +1,81 @@
+"""``growspace-gantry-gcode BAG``: the dry run of a hardware replay, nothing sent anywhere.
+
+For every step of a recording it prints the lines ``gantry_node`` would write to GRBL to put
+the lamp where the simulator's light was (the recorded ``light/state``: the applied light,
+after the simulator's clamping), through the same calibration and the same travel checks. A
+step whose light the rig cannot reach is printed as a comment saying why: the node would
+refuse it too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Iterator
+
+from growspace_gantry import calibration, grbl
+from growspace_gantry.main import default_calibration
+from growspace_sim.core.light import Light
+from growspace_sim.replay.bag import Bag, ReplayError
+from growspace_sim.replay.episodes import read_episodes
+
+
+def gcode_lines(bag_path: str, cal: calibration.Calibration, episode: int | None = None,
+                lamp_power: float = 1.0) -> Iterator[str]:
+    """The dry run, line by line (comments start with ``;``).
+
+    Raises:
+        ReplayError: the bag cannot be read or has no such episode.
+    """
+    with Bag(bag_path) as bag:
+        episodes = read_episodes(bag)
+    if episode is not None:
+        if not -len(episodes) <= episode < len(episodes):
+            raise ReplayError(f'--episode {episode}: the recording has {len(episodes)} '
+                              f'episode(s)')
+        episodes = [episodes[episode]]
+    lamp = grbl.lamp_line(lamp_power * cal.lamp_max_s)
+    for ep in episodes:
+        yield f'; episode {ep.index} (reset_id {ep.reset_id}, seed {ep.seed})'
+        for record in ep.steps:
+            out = record.outputs.get('light/state')
+            if out is None:
+                continue
+            msg = out.decode()
+            light = Light(msg.mode == 1, msg.x, msg.z, msg.width, msg.radius)
+            where = f'step {record.result.step} (step_id {record.result.step_id})'
+            size = f'radius {light.radius:.4f}' if light.spot else f'width {light.width:.4f}'
+            try:
+                target = cal.to_machine(light)
+            except calibration.TargetError as e:
+                yield f'; {where}: NOT SENT: {e}'
+                continue
+            yield f'; {where}: x {light.x:.4f} m, {size} m'
+            yield grbl.jog_line(target, cal.feed_mm_min)
+            if lamp:
+                yield lamp  # sent once the jog is done (GRBL refuses G-code while jogging)
+                lamp = ''
+    yield grbl.lamp_line(0.0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console script; exit 0, or 2 with one line on an unreadable bag or calibration."""
+    parser = argparse.ArgumentParser(prog='growspace-gantry-gcode', description=__doc__.split(
+        '\n')[0])
+    parser.add_argument('bag')
+    parser.add_argument('--calibration', help='default: the installed config/gantry.yaml')
+    parser.add_argument('--episode', type=int, help='0-based, -1 = last; default: all')
+    parser.add_argument('--lamp-power', type=float, default=1.0, help='fraction of full power')
+    args = parser.parse_args(argv)
+    try:
+        cal = calibration.load(args.calibration or default_calibration())
+        for line in gcode_lines(args.bag, cal, args.episode, args.lamp_power):
+            print(line)
+    except (ReplayError, calibration.CalibrationError, ValueError) as e:
+        print(f'growspace-gantry-gcode: error: {e}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,394 @@
+"""The gantry node's logic over the simulator's ``Transport``: topics in, moves out, safety.
+
+Same topics and messages as ``sim_node`` (``growspace_sim.node.interface``), relative to the
+chamber namespace:
+
+| topic / service | type | direction |
+|---|---|---|
+| ``light/command`` | growspace_msgs/LightCommand | in: every mode; actions move the light by the simulator's own rules |
+| ``reset`` | growspace_msgs/ResetRequest | in: places the light as the simulator would for that seed and challenge |
+| ``gantry/estop`` | std_msgs/Empty (topic) and std_srvs/Trigger (service) | in: feed hold, lamp off, soft reset |
+| ``gantry/unlock``, ``gantry/home`` | std_srvs/Trigger | in: a person's ``$X`` / ``$H`` |
+| ``chamber/config`` | std_msgs/String (latched JSON) | out |
+| ``light/state`` | growspace_msgs/LightCommand | out: the light the controller REPORTS reaching |
+| ``step_result`` | growspace_msgs/StepResult | out: once per reset and lockstep command, when the move is done |
+| ``gantry/status`` | diagnostic_msgs/DiagnosticArray | out: state, position, alarm, buffer, link (1 Hz and on change) |
+
+The light model is a ``Simulation`` that is never stepped: its light moves by ``core.light``
+(clamped inside the chamber exactly as in the simulator) and a reset places it with the task's
+own layout, so an agent's action, a bag's command and a teleop key mean the same light on both.
+Safety rules live here and in ``GrblController``: a command that cannot be reached is refused
+before anything is sent; no command for ``watchdog_s`` turns the lamp off and holds; every
+fault (alarm, lost link, estop) leaves the lamp off; nothing ever unlocks an alarm by itself.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import secrets
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from growspace_gantry.calibration import Calibration, TargetError
+from growspace_gantry.controller import GrblController
+from growspace_gantry.settings import GantryParams
+from growspace_sim import __version__, convert
+from growspace_sim.core.chamber import StepOutcome
+from growspace_sim.core.config import SimConfig
+from growspace_sim.core.errors import CommandError
+from growspace_sim.node.chamber_node import (
+    apply_command, EPISODE_OVER, Recorder, step_id_error)
+from growspace_sim.node.interface import (
+    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, STRING, Topic)
+from growspace_sim.node.transport import Transport
+from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.simulation import Simulation
+
+DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
+EMPTY = 'std_msgs/msg/Empty'
+TRIGGER = 'std_srvs/srv/Trigger'
+POLL_S = 0.01  # how often the controller's link is read [s]
+STATUS_PERIOD_S = 1.0  # gantry/status at least this often [s]
+GANTRY_METADATA = 'growspace_gantry'  # recording metadata: the rig and its calibration
+
+INPUTS = (
+    Topic('reset', 'reset', types.RESET_REQUEST, COMMAND_QOS),
+    Topic('command', 'light/command', types.LIGHT_COMMAND, COMMAND_QOS),
+    Topic('estop', 'gantry/estop', EMPTY, COMMAND_QOS),
+)
+OUTPUTS = (
+    Topic('config', 'chamber/config', STRING, ros_qos.LATCHED),
+    Topic('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
+    Topic('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
+    Topic('status', 'gantry/status', DIAGNOSTICS, OBSERVATION_QOS),
+)
+
+
+class GantryNode:
+    """One LED gantry on the chamber topics.
+
+    Args:
+        transport: the middleware (``RclpyTransport``; ``LocalTransport`` in tests).
+        controller: the GRBL controller (not yet connected; ``poll`` connects it).
+        cfg: the chamber configuration (challenge, light limits, chamber size).
+        params: the node settings.
+        recorder: receives every message's CDR bytes, or None.
+        clock: monotonic time [s].
+    """
+
+    def __init__(self, transport: Transport, controller: GrblController, cfg: SimConfig,
+                 params: GantryParams, recorder: Recorder | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.transport = transport
+        self.log = transport.logger
+        self.controller = controller
+        self.cal: Calibration = controller.cal
+        self.params = params
+        self.cfg = cfg
+        self.clock = clock
+        self.recorder = recorder
+        self.sim = Simulation(cfg)  # the light model: never stepped
+        self.reset_id = 0
+        self.last_step_id = 0
+        self.steps = 0  # commands stepped in this episode
+        self.seed: int | None = None
+        self.pending: tuple[int, int, float] | None = None  # (reset_id, step_id, deadline)
+        self.last_command = clock()
+        self.lamp_on = False
+        self._watchdog_tripped = False
+        self._next_status = 0.0
+        self._status_key: tuple = ()
+        self._channels: dict[str, int] = {}
+        self._size_warned = False
+        self._pubs = {t.key: transport.publisher(t.typename, t.name, t.qos) for t in OUTPUTS}
+        handlers = {'reset': self.on_reset, 'command': self.on_command,
+                    'estop': lambda msg, cdr: self.estop('gantry/estop topic')}
+        for t in INPUTS:
+            transport.subscribe(t.typename, t.name, t.qos, self._recorded(t.key, handlers[t.key]))
+        transport.serve(TRIGGER, 'gantry/estop', lambda req: self._trigger(
+            self.estop('gantry/estop service')))
+        transport.serve(TRIGGER, 'gantry/unlock', lambda req: self._trigger(
+            self.controller.unlock(), 'unlock ($X) sent; re-home if the position is in doubt'))
+        transport.serve(TRIGGER, 'gantry/home', lambda req: self._trigger(
+            self.controller.home(), 'homing ($H) sent'))
+        transport.create_timer(POLL_S, self.poll)
+        seed = params.seed if params.seed >= 0 else secrets.randbits(63)
+        self._start_recording(seed)
+        self.sim.reset(seed=seed)
+        self.seed = self.sim.seed
+        self._publish('config', types.new(STRING, data=self._config_payload(seed)))
+        # The machine does not move at start-up: the first command or reset moves it.
+
+    # --- inputs ----------------------------------------------------------------------------
+
+    def on_command(self, msg: Any, cdr: bytes) -> None:
+        """A LightCommand: move the model light by the simulator's rules, then the machine."""
+        self.last_command = self.clock()
+        self._watchdog_tripped = False
+        step_id = int(msg.step_id)
+        lockstep = self.params.mode == 'lockstep'
+        if lockstep:
+            error = step_id_error(step_id, self.last_step_id, self.log)
+            if error:
+                self._result(step_id, self.reset_id, info=error)
+                return
+            self.last_step_id = step_id
+            if self.steps >= self.cfg.episode_length:
+                self._result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
+                return
+        before = self.sim.chamber.light.copy()
+        try:
+            apply_command(self.sim, msg)
+            target = self.cal.to_machine(self.sim.chamber.light)
+        except (CommandError, TargetError) as e:
+            self.sim.chamber.light = before  # nothing was sent: the light stays the model's
+            self.log.warn(f'command:{getattr(e, "field", "travel")}',
+                          f'light/command: not sent to the machine: {e}')
+            if lockstep:
+                self._result(step_id, self.reset_id, info=f'error: {e}')
+            return
+        self._move(target, step_id if lockstep else None)
+
+    def on_reset(self, msg: Any, cdr: bytes) -> None:
+        """A ResetRequest: place the light as the simulator would, then move there."""
+        self.last_command = self.clock()
+        self._watchdog_tripped = False
+        reset_id = int(msg.reset_id)
+        try:
+            seed, challenge, setting = convert.reset_args(msg)
+            changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
+            cfg = self.cfg.replace(**changes) if changes else self.cfg
+            sim = self.sim.with_config(cfg) if cfg != self.cfg else self.sim
+            sim.reset(seed=seed)
+            target = self.cal.to_machine(sim.chamber.light)
+        except (CommandError, TargetError, ValueError) as e:
+            self.log.warn('reset', f'reset: rejected reset_id {reset_id}: {e}')
+            self._result(0, reset_id, info=f'error: {e}')
+            return
+        self.sim, self.cfg, self.seed = sim, cfg, sim.seed
+        self.reset_id, self.last_step_id, self.steps = reset_id, 0, 0
+        self._publish('config', types.new(STRING, data=self._config_payload(seed)))
+        self._move(target, 0)
+
+    def estop(self, source: str) -> str:
+        """Feed hold, lamp off, soft reset. Returns '' (the Trigger succeeds)."""
+        self.log.warn('estop', f'gantry: EMERGENCY STOP from {source}: feed hold, lamp off, '
+                      f'soft reset; a move in progress leaves the machine in alarm (unlock by '
+                      f'hand).')
+        self.controller.estop()
+        self.lamp_on = False
+        self._fail_pending('emergency stop')
+        return ''
+
+    # --- the loop --------------------------------------------------------------------------
+
+    def poll(self) -> None:
+        """Timer callback: run the controller, answer finished moves, watch the watchdog."""
+        now = self.clock()
+        self.controller.poll(now)
+        c = self.controller
+        if self.pending is not None:
+            reset_id, step_id, deadline = self.pending
+            if c.reached():
+                self.pending = None
+                if step_id:
+                    self.steps += 1
+                self._answer(reset_id, step_id)
+            elif c.failure or not c.ready:
+                self._fail_pending(c.failure or f'the controller is {c.state}')
+            elif now > deadline:
+                c.safe_stop()
+                self.lamp_on = False
+                self._fail_pending(f'the move did not finish within move_timeout_s = '
+                                   f'{self.params.move_timeout_s:g} s; holding, lamp off')
+        watchdog = self.params.watchdog_s
+        if watchdog and self.lamp_on and not self._watchdog_tripped \
+                and now - self.last_command > watchdog:
+            self._watchdog_tripped = True
+            self.lamp_on = False
+            c.safe_stop()
+            self._fail_pending('watchdog')
+            self.log.warn('watchdog', f'gantry: no command for {watchdog:g} s (watchdog_s): '
+                          f'lamp off, holding; the next command turns it on again.')
+        realtime_due = self.params.mode == 'realtime' and now >= self._next_status
+        key = (c.state, c.alarm, c.phase, c.fault)
+        if key != self._status_key or now >= self._next_status:
+            self._status_key = key
+            self._next_status = now + (1.0 / self.params.status_hz if
+                                       self.params.mode == 'realtime' else STATUS_PERIOD_S)
+            self._publish('status', self._diagnostics())
+            if realtime_due and c.position is not None:
+                self._publish('light', self._reached_light(0, self.transport.now_ns()))
+
+    def _move(self, target: dict[str, float], step_id: int | None) -> None:
+        c = self.controller
+        if not c.ready:
+            reason = c.fault or c.failure or f'the controller is {c.state}'
+            self.log.warn('command:controller', f'light/command: not sent: {reason}')
+            if step_id is not None:
+                self._result(step_id, self.reset_id, info=f'error: gantry not ready: {reason}')
+            return
+        if self.pending is not None:
+            self._fail_pending(f'superseded by a newer command (step_id {step_id})')
+        if self.cal.size is None and not self._size_warned:
+            self._size_warned = True
+            self.log.warn('size', f'gantry: the calibration has no size axis: the lamp lights a '
+                          f'fixed {self.cal.fixed_size_m:g} m whatever width or radius is asked.')
+        c.goto(target)
+        c.set_lamp(self.params.lamp_power * self.cal.lamp_max_s)
+        self.lamp_on = self.params.lamp_power > 0
+        if step_id is not None:
+            self.pending = (self.reset_id, step_id, self.clock() + self.params.move_timeout_s)
+
+    def _fail_pending(self, reason: str) -> None:
+        if self.pending is None:
+            return
+        reset_id, step_id, _ = self.pending
+        self.pending = None
+        self.log.warn('move', f'gantry: step_id {step_id} failed: {reason}')
+        self._result(step_id, reset_id, info=f'error: {reason}')
+
+    # --- outputs ---------------------------------------------------------------------------
+
+    def _answer(self, reset_id: int, step_id: int) -> None:
+        stamp = self.transport.now_ns()
+        self._publish('light', self._reached_light(step_id, stamp))
+        truncated = self.steps >= self.cfg.episode_length
+        self._result(step_id, reset_id, stamp=stamp, truncated=truncated)
+
+    def _reached_light(self, step_id: int, stamp: int) -> Any:
+        position = self.controller.position
+        light = self.cal.to_light(position, self.sim.chamber.light)
+        return convert.light_msg(light, step_id, stamp, self.params.frame_id)
+
+    def _result(self, step_id: int, reset_id: int, info: str = '', stamp: int | None = None,
+                truncated: bool = False) -> None:
+        outcome = StepOutcome(0.0, np.zeros(self.cfg.plant_count), False, truncated, 0)
+        self._publish('result', convert.step_result_msg(
+            outcome, step_id=step_id, reset_id=reset_id, step=self.steps,
+            stamp_ns=self.transport.now_ns() if stamp is None else stamp,
+            frame_id=self.params.frame_id, info=info))
+
+    def _diagnostics(self) -> Any:
+        c = self.controller
+        level = 2 if (c.alarm is not None or c.fault or c.phase == 'offline') else \
+            0 if c.ready else 1
+        if c.fault:
+            message = f'fault: {c.fault}'
+        elif c.alarm is not None:
+            message = f'ALARM:{c.alarm}' + (f' {c.failure}' if c.failure else '')
+        else:
+            message = c.state
+        pos = c.position or {}
+        values = {
+            'state': c.state, 'link': 'connected' if c.link is not None else 'offline',
+            'grbl_version': c.version, 'alarm': '' if c.alarm is None else str(c.alarm),
+            'mpos_x_mm': f'{pos.get("X", float("nan")):.3f}',
+            'mpos_y_mm': f'{pos.get("Y", float("nan")):.3f}',
+            'mpos_z_mm': f'{pos.get("Z", float("nan")):.3f}',
+            'rx_buffer_used_bytes': str(c.counter.used), 'lines_in_flight': str(
+                c.counter.pending),
+            'planner_free_blocks': '' if c.status is None or c.status.planner_free is None
+            else str(c.status.planner_free),
+            'lamp_s': f'{c.lamp_s:g}', 'watchdog_tripped': str(self._watchdog_tripped).lower(),
+            'last_failure': c.failure or '',
+        }
+        kv = [types.new('diagnostic_msgs/msg/KeyValue', key=k, value=v)
+              for k, v in values.items()]
+        status = types.new('diagnostic_msgs/msg/DiagnosticStatus', level=bytes([level]),
+                           name=f'{self.transport.resolve("~")}: GRBL controller',
+                           message=message, hardware_id=self.params.port, values=kv)
+        return types.new(DIAGNOSTICS, header=convert.header(self.transport.now_ns(),
+                                                            self.params.frame_id),
+                         status=[status])
+
+    def _config_payload(self, seed: int | None) -> str:
+        p = self.params
+        return config_json(self.cfg, seed, mode=p.mode, rate_hz=0.0, frame_id=p.frame_id,
+                           reset_id=self.reset_id, episode=self.sim.episode,
+                           digit=self.sim.digit, source='gantry')
+
+    @staticmethod
+    def _trigger(error: str, done: str = 'done') -> Any:
+        return types.new(f'{TRIGGER}_Response', success=not error, message=error or done)
+
+    def _publish(self, key: str, msg: Any) -> None:
+        cdr = self._pubs[key](msg)
+        self._record(key, cdr)
+
+    # --- recording (the node's own run, in the simulator's format) -----------------------
+
+    def _recorded(self, key: str, handler: Callable[[Any, bytes], None]) -> Callable:
+        def receive(msg: Any, cdr: bytes) -> None:
+            self._record(key, cdr)
+            handler(msg, cdr)
+        return receive
+
+    def _start_recording(self, seed: int) -> None:
+        if self.recorder is None:
+            return
+        namespace = self.transport.resolve('~').rsplit('/', 1)[0] or '/'
+        metadata = growspace_metadata(self.cfg, seed, namespace=namespace,
+                                      frame_id=self.params.frame_id, rate_hz=0.0,
+                                      lockstep=self.params.mode == 'lockstep')
+        try:
+            for t in (*INPUTS, *OUTPUTS):
+                self._channels[t.key] = self.recorder.add_channel(
+                    self.transport.resolve(t.name), t.typename, t.qos)
+            self.recorder.add_metadata(METADATA_NAME, metadata)
+            self.recorder.add_metadata(GANTRY_METADATA, {
+                'version': __version__, 'port': self.params.port,
+                'calibration': json.dumps(_plain(self.cal), sort_keys=True)})
+        except Exception as e:  # noqa: BLE001 - recording never stops the machine's safety
+            self._recording_failed(e)
+
+    def _record(self, key: str, cdr: bytes) -> None:
+        channel = self._channels.get(key)
+        if channel is None:
+            return
+        now = self.transport.now_ns()
+        try:
+            self.recorder.write_many([(channel, cdr, now, now)])
+        except Exception as e:  # noqa: BLE001 - same
+            self._recording_failed(e)
+
+    def _recording_failed(self, error: Exception) -> None:
+        if getattr(self.recorder, 'error', None) is None:
+            self.log.warn('recorder', f'recorder: a message was not recorded: {error}')
+            return
+        self._channels.clear()
+        self.log.warn('recorder:stopped', f'recording stopped, the gantry goes on: {error}')
+
+    # --- shutdown --------------------------------------------------------------------------
+
+    def close(self, timeout_s: float = 2.0) -> None:
+        """Lamp off and the machine idle, then close the link and the recording. Idempotent.
+
+        The lamp-off line is confirmed by the controller within ``timeout_s``, else a soft
+        reset (which switches the spindle output off) makes sure.
+        """
+        c = self.controller
+        if c.link is not None:
+            c.safe_stop()
+            deadline = self.clock() + timeout_s
+            while self.clock() < deadline and c.ready and not c.lamp_confirmed_off():
+                c.poll(self.clock())
+                time.sleep(0.005)
+            if c.link is not None and not c.lamp_confirmed_off():
+                c.estop()
+        c.close()
+        self._fail_pending('the gantry node is shutting down')
+        recorder, self.recorder = self.recorder, None
+        self._channels.clear()
+        if recorder is not None:
+            try:
+                recorder.close()
+            except Exception as e:  # noqa: BLE001 - shutting down goes on
+                self.log.warn('recorder', f'recorder close failed: {e}')
+
+
+def _plain(cal: Calibration) -> dict[str, Any]:
+    return dataclasses.asdict(cal)
