@@ -18,6 +18,7 @@ EXPECTED_PACKAGES = {
     'growspace_msgs': 'ros.ament_cmake',
     'growspace_sim': 'ros.ament_python',
     'growspace_gym_bridge': 'ros.ament_python',
+    'growspace_gantry': 'ros.ament_python',
 }
 MANIFESTS = sorted((ROOT / 'src').glob('*/package.xml'))
 

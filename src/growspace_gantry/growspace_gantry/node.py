@@ -144,7 +144,9 @@ class GantryNode:
             apply_command(self.sim, msg)
             target = self.cal.to_machine(self.sim.chamber.light)
         except (CommandError, TargetError) as e:
-            self.sim.chamber.light = before  # nothing was sent: the light stays the model's
+            # Nothing is sent: the model light goes back to where the machine is going.
+            self.sim.place_light(x=before.x, z=before.z, width=before.width,
+                                 radius=before.radius)
             self.log.warn(f'command:{getattr(e, "field", "travel")}',
                           f'light/command: not sent to the machine: {e}')
             if lockstep:
@@ -194,6 +196,7 @@ class GantryNode:
             reset_id, step_id, deadline = self.pending
             if c.reached():
                 self.pending = None
+                self.last_command = now  # the watchdog counts from the answer
                 if step_id:
                     self.steps += 1
                 self._answer(reset_id, step_id)
@@ -205,7 +208,8 @@ class GantryNode:
                 self._fail_pending(f'the move did not finish within move_timeout_s = '
                                    f'{self.params.move_timeout_s:g} s; holding, lamp off')
         watchdog = self.params.watchdog_s
-        if watchdog and self.lamp_on and not self._watchdog_tripped \
+        # A lockstep move in progress is bounded by move_timeout_s, not by the watchdog.
+        if watchdog and self.lamp_on and not self._watchdog_tripped and self.pending is None \
                 and now - self.last_command > watchdog:
             self._watchdog_tripped = True
             self.lamp_on = False
@@ -298,7 +302,7 @@ class GantryNode:
         }
         kv = [types.new('diagnostic_msgs/msg/KeyValue', key=k, value=v)
               for k, v in values.items()]
-        status = types.new('diagnostic_msgs/msg/DiagnosticStatus', level=bytes([level]),
+        status = types.new('diagnostic_msgs/msg/DiagnosticStatus', level=level,
                            name=f'{self.transport.resolve("~")}: GRBL controller',
                            message=message, hardware_id=self.params.port, values=kv)
         return types.new(DIAGNOSTICS, header=convert.header(self.transport.now_ns(),

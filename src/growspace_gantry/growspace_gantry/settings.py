@@ -18,7 +18,7 @@ class GantryParams:
     baud: int = 115200  # serial baud rate (GRBL 1.1 default)
     calibration: str = ''  # calibration YAML; empty = the installed config/gantry.yaml
     mode: str = 'lockstep'  # lockstep: answer each step_id when the move is done; realtime
-    watchdog_s: float = 10.0  # s without a command -> lamp off and hold; 0 = off
+    watchdog_s: float = 10.0  # s without a command (after the last answer) -> lamp off, hold
     lamp_power: float = 1.0  # lamp power while lit, fraction of full power (S = $30) [1]
     status_hz: float = 10.0  # Hz; status reports asked of GRBL (and light/state in realtime)
     move_timeout_s: float = 120.0  # s; a lockstep move not done by then is answered as failed
