@@ -36,10 +36,12 @@ class NodeProcess:
     node would block once the pipe is full.
     """
 
-    def __init__(self, *ros_args: str, namespace: str | None = '/gs_test') -> None:
+    def __init__(self, *ros_args: str, namespace: str | None = '/gs_test',
+                 executable: str | None = None) -> None:
         remap = ['-r', f'__ns:={namespace}'] if namespace else []
-        self.argv = [sim_node_executable(), '--ros-args', *remap, *ros_args]
+        self.argv = [executable or sim_node_executable(), '--ros-args', *remap, *ros_args]
         self._out = tempfile.TemporaryFile('w+')  # closed in stop()
+        self._log = ''
         self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=subprocess.STDOUT,
                                      text=True)
 
@@ -49,12 +51,18 @@ class NodeProcess:
         return self._out.read()
 
     def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
-        """Send ``sig``, wait; returns the exit status and everything the node logged."""
+        """Send ``sig``, wait; returns the exit status and everything the node logged.
+
+        A second call (a ``finally`` after the test's own stop) returns the first result.
+        """
+        if self._out.closed:
+            return self.proc.returncode, self._log
         try:
             if self.proc.poll() is None:
                 self.proc.send_signal(sig)
             self.proc.wait(timeout=TIMEOUT_S)
-            return self.proc.returncode, self.output()
+            self._log = self.output()
+            return self.proc.returncode, self._log
         finally:
             if self.proc.poll() is None:
                 self.proc.kill()

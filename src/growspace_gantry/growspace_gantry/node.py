@@ -384,7 +384,10 @@ class GantryNode:
             if c.link is not None and not c.lamp_confirmed_off():
                 c.estop()
         c.close()
-        self._fail_pending('the gantry node is shutting down')
+        try:
+            self._fail_pending('the gantry node is shutting down')
+        except Exception:  # noqa: BLE001 - a signal already shut the ROS context down
+            self.pending = None
         recorder, self.recorder = self.recorder, None
         self._channels.clear()
         if recorder is not None:

@@ -51,14 +51,17 @@ class ChamberLink:
             in-process one), in the chamber's namespace.
         with_state: also read ``plant/state`` and ``light/state`` (for ``info``); without
             them the node does not even build them.
+        with_image: wait for the step's image (a chamber without a camera, the LED gantry,
+            answers with ``light/state`` and ``step_result`` only).
         liveness: called while waiting; raises if the node is known to be gone.
     """
 
     def __init__(self, transport: Any, with_state: bool = True,
-                 liveness: Liveness | None = None) -> None:
+                 liveness: Liveness | None = None, with_image: bool = True) -> None:
         self.transport = transport
         self.liveness = liveness or (lambda describe: None)
         self.with_state = with_state
+        self.with_image = with_image
         self.stale = 0  # late or duplicate replies dropped
         self._expect: tuple[int, int] | None = None  # (reset_id, step_id) awaited
         self._result: Any = None
@@ -69,7 +72,9 @@ class ChamberLink:
         self._command_msg = types.new(types.LIGHT_COMMAND)
         self._reset = transport.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
         transport.subscribe(types.STEP_RESULT, RESULT, OBSERVATION_QOS, self._on_result)
-        transport.subscribe(convert.IMAGE, IMAGE, OBSERVATION_QOS, self._frame_callback(IMAGE))
+        if with_image:
+            transport.subscribe(convert.IMAGE, IMAGE, OBSERVATION_QOS,
+                                self._frame_callback(IMAGE))
         if with_state:
             transport.subscribe(types.PLANT_STATE, PLANT, OBSERVATION_QOS,
                                 self._frame_callback(PLANT))
@@ -83,7 +88,13 @@ class ChamberLink:
 
     @property
     def outputs(self) -> tuple[str, ...]:
-        return (RESULT, IMAGE, *(STATE_TOPICS if self.with_state else ()))
+        return self._awaited(RESULT)
+
+    def _awaited(self, *first: str) -> tuple[str, ...]:
+        """The outputs of one step this link waits for (after ``first``)."""
+        if self.with_image:
+            return (*first, IMAGE, *(STATE_TOPICS if self.with_state else ()))
+        return (*first, *((LIGHT,) if self.with_state else ()))
 
     # --- callbacks (never raise: the transport would only log it) -----------------------
 
@@ -200,7 +211,7 @@ class ChamberLink:
         assert self._expect is not None, 'wait() without a request'
         reset_id, step_id = self._expect
         deadline = time.monotonic() + timeout_s
-        wanted = (IMAGE, *(STATE_TOPICS if self.with_state else ()))
+        wanted = self._awaited()
         while True:
             result = self._result
             missing = RESULT
