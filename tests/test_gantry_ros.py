@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 
 from ament_index_python.packages import get_package_prefix
+import numpy as np
 import pytest
 
 from grbl_emulator import GrblEmulator
@@ -84,3 +86,55 @@ def test_invalid_calibration_exits_2_naming_the_key(grbl: GrblEmulator, tmp_path
     assert code == 2
     assert "x.axis = 'Q' must be X, Y or Z" in log
     assert grbl.lines == []  # nothing was sent
+
+
+def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
+    """``growspace-replay play --only light/command --step-period`` drives the gantry through
+    a sample oracle episode; the reached light matches the simulator's within the tolerance."""
+    from growspace_sim.replay.play import play
+    from growspace_sim.replay.bag import Bag
+
+    bag = os.path.join(os.path.dirname(__file__), '..', 'bags', 'oracle_control_hard.mcap')
+    with Bag(bag) as b:
+        sim_lights = {m.step_id: m for m in (x.decode() for x in
+                                             b.messages(['/growspace/light/state']))}
+    with GrblEmulator(RIG, speedup=200.0, link_dir=tmp_path) as grbl:
+        node = NodeProcess('-p', f'port:={grbl.port}', '-p', 'seed:=2024', '-p',
+                           'challenge:=control', '-p', 'setting:=hard', namespace='/growspace',
+                           executable=gantry_executable())
+        listener = RclpyTransport('replay_listener', '/growspace')
+        reached, results = {}, []
+        try:
+            listener.subscribe(types.LIGHT_COMMAND, 'light/state', COMMAND_QOS,
+                               lambda m, _: reached.__setitem__(m.step_id, m))
+            listener.subscribe(types.STEP_RESULT, 'step_result', COMMAND_QOS,
+                               lambda m, _: results.append(m))
+            deadline = time.monotonic() + 20.0
+            while not listener.matched('step_result') and time.monotonic() < deadline:
+                listener.spin_once(0.05)
+            played: list = []
+
+            def replay() -> None:
+                try:
+                    played.append(play(bag, topics=['/growspace/light/command'],
+                                            step_period_s=0.2, wait_for_subscribers_s=10.0))
+                except Exception as e:  # noqa: BLE001 - shown by the assertion below
+                    played.append(e)
+            thread = threading.Thread(target=replay)
+            thread.start()
+            deadline = time.monotonic() + 40.0
+            while (thread.is_alive() or len(results) < 50) and time.monotonic() < deadline:
+                listener.spin_once(0.05)
+        finally:
+            listener.close()
+            node.stop()
+    assert played == [50]
+    assert [r.info for r in results] == [''] * 50, [r.info for r in results if r.info]
+    errors = np.array([[abs(reached[i].x - sim_lights[i].x), abs(reached[i].width -
+                                                                 sim_lights[i].width)]
+                       for i in range(1, 51)]) * 1000.0  # mm
+    print(f'replay onto the emulated gantry, 50 steps: x max {errors[:, 0].max():.3f} mm, '
+          f'RMS {np.sqrt((errors[:, 0] ** 2).mean()):.3f} mm; width max '
+          f'{errors[:, 1].max():.3f} mm, RMS {np.sqrt((errors[:, 1] ** 2).mean()):.3f} mm')
+    assert errors[:, 0].max() <= 0.05 + 1e-6  # position_tolerance_mm of the calibration
+    assert errors[:, 1].max() <= 2 * 0.05 + 1e-6  # width = 2 x lamp height above the canopy

@@ -41,7 +41,11 @@ def main(argv: list[str] | None = None) -> int:
     speed = p_play.add_mutually_exclusive_group()
     speed.add_argument('--rate', type=float, default=1.0, help='speed factor (1 = original)')
     speed.add_argument('--fast', action='store_true', help='as fast as possible')
-    p_play.add_argument('--topics', nargs='+', help='recorded topic names to publish')
+    speed.add_argument('--step-period', type=float, metavar='SECONDS',
+                       help='one recorded step (command or reset) per SECONDS of wall time, '
+                            'e.g. 3600 for a real plant on the LED gantry')
+    p_play.add_argument('--topics', '--only', nargs='+',
+                        help='recorded topic names to publish, e.g. /growspace/light/command')
     p_play.add_argument('--domain-id', type=int, help='default: ROS_DOMAIN_ID')
     p_play.add_argument('--wait', type=float, default=1.0,
                         help='seconds to wait for subscribers first')
@@ -77,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
             with recording.stop_on_signals():
                 n = play(args.bag, rate=None if args.fast else args.rate, topics=args.topics,
                          domain_id=args.domain_id, wait_for_subscribers_s=args.wait,
-                         log=lambda line: print(line, file=sys.stderr))
+                         log=lambda line: print(line, file=sys.stderr),
+                         step_period_s=args.step_period)
             print(f'published {n} messages')
         elif args.command == 'recover':
             rep = recording.recover(args.bag, args.out)

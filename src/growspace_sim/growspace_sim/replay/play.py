@@ -7,11 +7,14 @@ import time
 from typing import Callable, Iterable
 
 from growspace_sim.replay.bag import Bag, ReplayError
+from growspace_sim.ros import types
+
+REQUESTS = (types.LIGHT_COMMAND, types.RESET_REQUEST)  # what --step-period paces
 
 
 def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[str] | None = None,
          domain_id: int | None = None, wait_for_subscribers_s: float = 0.0,
-         log: Callable[[str], None] | None = None) -> int:
+         log: Callable[[str], None] | None = None, step_period_s: float | None = None) -> int:
     """Republish a recording on its topics over rclpy (``ros2 bag play`` without rosbag2).
 
     On a machine with ROS 2, ``ros2 bag play BAG`` does the same through rmw.
@@ -25,6 +28,10 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
         wait_for_subscribers_s: Before playing, wait up to this long for every publisher to
             match a subscriber.
         log: Where progress lines go (None = quiet).
+        step_period_s: Pace by steps instead of recorded times: each request (a LightCommand
+            or a ResetRequest) after the first is published this many seconds after the
+            previous one, what else came between them right after it. A real plant grows in
+            hours: 3600 gives a hardware replay one recorded step per hour.
 
     Returns:
         The number of messages published.
@@ -34,6 +41,8 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
     """
     if rate is not None and not rate > 0:
         raise ReplayError(f'rate must be > 0, got {rate}.')
+    if step_period_s is not None and not step_period_s > 0:
+        raise ReplayError(f'step period must be > 0 s, got {step_period_s}.')
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     count = 0
@@ -49,8 +58,13 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
                 transport.spin_once(0.02)
             start_wall = time.monotonic()
             first_log: int | None = None
+            next_request = time.monotonic()
             for msg in bag.messages(wanted):
-                if rate is not None:
+                if step_period_s is not None:
+                    if msg.typename in REQUESTS:
+                        time.sleep(max(0.0, next_request - time.monotonic()))
+                        next_request = time.monotonic() + step_period_s
+                elif rate is not None:
                     first_log = msg.log_time if first_log is None else first_log
                     delay = (start_wall + (msg.log_time - first_log) / 1e9 / rate
                              - time.monotonic())
