@@ -37,6 +37,8 @@ def gcode_lines(bag_path: str, cal: calibration.Calibration, episode: int | None
     lamp = grbl.lamp_line(lamp_power * cal.lamp_max_s)
     for ep in episodes:
         yield f'; episode {ep.index} (reset_id {ep.reset_id}, seed {ep.seed})'
+        for problem in ep.damaged:  # a dry run shows what a replay of this bag would miss
+            yield f'; incomplete: {problem}'
         for record in ep.steps:
             out = record.outputs.get('light/state')
             if out is None:

@@ -5,10 +5,14 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
+
+from mcap.records import Message
 
 from growspace_sim.node.interface import TOPICS
 from growspace_sim.recording import PROFILE
+from growspace_sim.recording.scan import (
+    Damage, damage_from_metadata, McapScan, RECOVERY_METADATA)
 from growspace_sim.ros import qos as ros_qos, types
 
 
@@ -43,18 +47,25 @@ class TopicInfo:
 class Bag:
     """A finished MCAP recording opened for reading (see ``recording.recover`` for broken ones).
 
+    A chunk that cannot be read (CRC mismatch, decompression error, bad record) does not stop
+    the reading: ``messages`` skips it, adds it to ``damage`` and calls ``on_damage``.
+
     Args:
         path: The ``.mcap`` file.
+        on_damage: Called with each unreadable part of the file as reading meets it.
 
     Raises:
         ReplayError: The file does not exist, is not MCAP, is not profile ``ros2``, or has no
             summary (cut short by a crash: the message says how to recover it).
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike,
+                 on_damage: Callable[[Damage], None] | None = None) -> None:
         from mcap.reader import SeekingReader
 
         self.path = Path(path)
+        self.on_damage = on_damage
+        self.damage: list[Damage] = []  # what reading has skipped so far
         if not self.path.exists():
             raise ReplayError(f'No recording at {self.path}: the file does not exist.')
         if self.path.is_dir():
@@ -96,7 +107,16 @@ class Bag:
                              channel.metadata.get('topic_type_hash', ''), counts.get(cid, 0))
             self._channels[cid] = info
             self.topics[channel.topic] = info
-        self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+        try:
+            self.metadata = {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+        except Exception as e:  # noqa: BLE001 - metadata records carry no CRC of their own
+            self.metadata = {}
+            self._lost([Damage(0, 0, 'metadata', f'unreadable metadata record: {e!r}')])
+        if RECOVERY_METADATA in self.metadata:  # the holes of a recovered file
+            try:
+                self._lost(damage_from_metadata(self.metadata[RECOVERY_METADATA]))
+            except ValueError as e:
+                self._lost([Damage(0, 0, 'metadata', str(e))])
 
     @property
     def start_time(self) -> int:
@@ -107,19 +127,34 @@ class Bag:
         return self.summary.statistics.message_end_time if self.summary.statistics else 0
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
-        """Messages in file order (the order they were recorded in).
+        """Messages in file order (the order they were recorded in), unreadable chunks skipped.
 
         Args:
             topics: Only these topics; None = all.
         """
         wanted = None if topics is None else set(topics)
-        for _, channel, message in self._reader.iter_messages(
-                topics=None if wanted is None else list(wanted), log_time_order=False):
-            info = self._channels.get(channel.id)
-            if info is None:
+        scan = McapScan(self._stream, self.summary.chunk_indexes)
+        reported = 0
+        for record in scan.records():
+            if len(scan.damage) > reported:
+                self._lost(scan.damage[reported:])
+                reported = len(scan.damage)
+            if not isinstance(record, Message):
                 continue
-            yield BagMessage(info.topic, info.typename, message.log_time,
-                             message.publish_time, message.data)
+            info = self._channels.get(record.channel_id)
+            if info is None or (wanted is not None and info.topic not in wanted):
+                continue
+            yield BagMessage(info.topic, info.typename, record.log_time,
+                             record.publish_time, record.data)
+        self._lost(scan.damage[reported:])
+
+    def _lost(self, damage: list[Damage]) -> None:
+        for part in damage:
+            if part in self.damage:  # a second pass over the file meets the same damage
+                continue
+            self.damage.append(part)
+            if self.on_damage is not None:
+                self.on_damage(part)
 
     def chamber_topics(self, namespace: str | None = None) -> dict[str, str]:
         """Map the node's relative topic names to the recorded ones.

@@ -53,6 +53,10 @@ def main(argv: list[str] | None = None) -> int:
     p_recover.add_argument('bag')
     p_recover.add_argument('out')
     args = parser.parse_args(argv)
+
+    def warn(line: str) -> None:
+        print(f'warning: {line}', file=sys.stderr)
+
     try:
         if args.command == 'info':
             info = summary(args.bag, args.namespace)
@@ -66,8 +70,17 @@ def main(argv: list[str] | None = None) -> int:
                                     progress=progress)
             for warning in report.warnings:
                 print(f'warning: {warning}', file=sys.stderr)
-            if not report.ok:
+            for part in report.unreadable:
+                print(f'warning: skipped unreadable {part}', file=sys.stderr)
+            if report.mismatch is not None:
                 print(f'MISMATCH at {report.mismatch} (after {report.steps} matching steps)')
+                return 1
+            if report.unverified:
+                print(f'NOT VERIFIED: {len(report.unverified)} episode(s) could not be checked '
+                      f'(unreadable parts of the file); {report.episodes} other episode(s), '
+                      f'{report.steps} step(s) are bit-identical.')
+                for line in report.unverified:
+                    print(f'  {line}')
                 return 1
             print(f'REPRODUCED: {report.episodes} episode(s), {report.steps} step(s), '
                   f'{report.messages_compared} messages: every image, plant state, applied '
@@ -75,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == 'export':
             n = export_episode(args.bag, args.out, episode=args.episode, fps=args.fps,
                                scale=args.scale, namespace=args.namespace,
-                               overwrite=args.overwrite)
+                               overwrite=args.overwrite, warn=warn)
             print(f'wrote {n} frames to {args.out}')
         elif args.command == 'play':
             with recording.stop_on_signals():
@@ -90,8 +103,14 @@ def main(argv: list[str] | None = None) -> int:
                 f'{": " + rep.reason if rep.reason else ""}'
             print(f'recovered {rep.messages} messages from {rep.chunks} chunk(s) and '
                   f'{rep.metadata} metadata record(s) into {args.out} ({state})')
+            for part in rep.skipped:
+                print(f'skipped unreadable {part}')
     except (ReplayError, recording.RecordingError, ValueError) as e:
         print(f'growspace-replay: error: {e}', file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f'growspace-replay: error: {e.strerror or e}'
+              f'{f" ({e.filename})" if e.filename else ""}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

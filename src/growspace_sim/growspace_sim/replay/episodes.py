@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from typing import Any
 
 from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import METADATA_NAME
+from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, BagMessage
 
 # Fields each topic's comparison covers: what the simulation decides, not the ids and stamps.
@@ -40,14 +42,22 @@ class Episode:
     steps: list[StepRecord]  # steps[0] is the reset
     # StepResults answered without a step: rejected commands or resets, commands after the end
     rejected: list[Any] = dataclasses.field(default_factory=list)
+    start_lost: bool = False  # its reset was in an unreadable part: steps[0] is a later step
+    gaps: list[str] = dataclasses.field(default_factory=list)  # steps or reset missing
+    unreadable: list[Damage] = dataclasses.field(default_factory=list)  # lost parts it overlaps
+
+    @property
+    def damaged(self) -> list[str]:
+        """Why parts of this episode are missing; empty for an intact episode."""
+        return self.gaps + [f'unreadable {part}' for part in self.unreadable]
 
     @property
     def n_steps(self) -> int:
-        return len(self.steps) - 1
+        return len(self.steps) - (0 if self.start_lost else 1)
 
     @property
     def episode_return(self) -> float:
-        return float(sum(s.result.reward for s in self.steps[1:]))
+        return float(sum(s.result.reward for s in self.steps[0 if self.start_lost else 1:]))
 
     @property
     def done(self) -> bool:
@@ -66,6 +76,10 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
     command or reset, a command after the episode's end); it goes to ``Episode.rejected``. Steps
     recorded before the first reset (a recorder that joined a running chamber) are dropped:
     without their reset they cannot be re-simulated.
+
+    Where the file has unreadable parts (``Bag.damage``), every episode they touch lists why in
+    ``Episode.damaged``: the byte offset of the lost chunk, steps missing from the numbering, a
+    reset that was lost (the steps after it form an episode with ``start_lost``).
 
     Args:
         bag: The open recording.
@@ -127,9 +141,35 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
                 fresh_config = None
                 episodes.append(Episode(len(episodes), int(result.reset_id), cfg, seed, known,
                                         [record]))
-            elif episodes:
-                episodes[-1].steps.append(record)
+            elif episodes and int(result.reset_id) == episodes[-1].reset_id \
+                    and result.step > episodes[-1].steps[-1].result.step:
+                last = episodes[-1]
+                expected = int(last.steps[-1].result.step) + 1
+                if result.step != expected:
+                    last.gaps.append(f'steps {expected}-{result.step - 1} missing')
+                last.steps.append(record)
+            elif episodes or bag.damage:  # the reset of this step's episode was lost
+                episodes.append(Episode(
+                    len(episodes), int(result.reset_id), cfg, None, False, [record],
+                    start_lost=True,
+                    gaps=[f'its reset and the steps before step {result.step} missing']))
+    _attribute_damage(bag, episodes)
     return episodes
+
+
+def _attribute_damage(bag: Bag, episodes: list[Episode]) -> None:
+    """Name each unreadable part of the file in the episodes its log-time range overlaps."""
+    starts = [e.steps[0].log_time for e in episodes]
+    for part in bag.damage:
+        if part.start_time is None:
+            continue  # no message was lost (e.g. a metadata record)
+        for i, episode in enumerate(episodes):
+            # An episode owns [its first message, the next episode's first); the first one also
+            # what came before it, which may have been its own start.
+            low = starts[i] if i else -math.inf
+            high = starts[i + 1] if i + 1 < len(starts) else math.inf
+            if part.start_time < high and part.end_time >= low:
+                episode.unreadable.append(part)
 
 
 def _config_from_json(value: Any) -> SimConfig | None:
@@ -172,9 +212,15 @@ def summary(path: str | os.PathLike, namespace: str | None = None) -> dict[str, 
                 'seed': e.seed, 'steps': e.n_steps, 'rejected': len(e.rejected),
                 'return': e.episode_return,
                 'success': bool(e.steps[-1].result.success), 'complete': e.done,
-                'duration_s': e.duration_ns / 1e9,
+                'duration_s': e.duration_ns / 1e9, 'damaged': e.damaged,
             } for e in episodes],
             'total_steps': sum(e.n_steps for e in episodes),
+            'unreadable': [{
+                'offset': part.offset, 'end': part.end, 'what': part.what,
+                'reason': part.reason, 'start_time_ns': part.start_time,
+                'end_time_ns': part.end_time,
+                'episodes': [e.index for e in episodes if part in e.unreadable],
+            } for part in bag.damage],
         }
 
 
@@ -192,4 +238,11 @@ def format_summary(info: dict[str, Any]) -> str:
                      f'{str(e["success"]):>7} {str(e["complete"]):>8} '
                      f'{e["duration_s"]:>7.1f}')
     lines.append('messages: ' + ', '.join(f'{t} {n}' for t, n in info['messages'].items()))
+    for part in info['unreadable']:
+        touched = ', '.join(map(str, part['episodes'])) or 'none'
+        lines.append(f'UNREADABLE {part["what"]} at bytes {part["offset"]}-{part["end"]} '
+                     f'({part["reason"]}); skipped; episode(s) touched: {touched}')
+    for e in info['episodes']:
+        if e['damaged']:
+            lines.append(f'episode {e["index"]} is incomplete: {"; ".join(e["damaged"])}')
     return '\n'.join(lines)

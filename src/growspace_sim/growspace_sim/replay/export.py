@@ -4,19 +4,22 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
 
 from growspace_sim import convert
 from growspace_sim.recording import METADATA_NAME
+from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import read_episodes
 
 
 def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: int = 0,
                    fps: float | None = None, scale: int = 4, namespace: str | None = None,
-                   progress: bool = True, overwrite: bool = False) -> int:
+                   progress: bool = True, overwrite: bool = False,
+                   warn: Callable[[str], None] | None = None) -> int:
     """Write one episode's camera images as an animated GIF or an MP4 video.
 
     Args:
@@ -28,6 +31,8 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         namespace: The chamber namespace; None = the only one.
         progress: Show a progress bar on stderr.
         overwrite: Replace ``out`` if it exists.
+        warn: Told of each unreadable part of the file and of a chosen episode with steps
+            missing (the frames that could be read are exported).
 
     Returns:
         The number of frames written.
@@ -44,12 +49,19 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         raise ReplayError(f'{out} exists already, not overwriting.')
     if scale < 1:
         raise ReplayError(f'scale must be >= 1, got {scale}.')
-    with Bag(path) as bag:
+    def skipped(part: Damage) -> None:
+        if warn is not None:
+            warn(f'skipped unreadable {part}')
+
+    with Bag(path, on_damage=skipped) as bag:
         episodes = read_episodes(bag, namespace)
         if not -len(episodes) <= episode < len(episodes):
             raise ReplayError(f'{bag.path} has {len(episodes)} episode(s); episode {episode} '
                               f'does not exist.')
         chosen = episodes[episode]
+        if chosen.damaged and warn is not None:
+            warn(f'episode {chosen.index} is incomplete ({"; ".join(chosen.damaged)}); '
+                 f'exporting the frames that could be read.')
         rate = float(bag.metadata.get(METADATA_NAME, {}).get('rate_hz') or 10.0)
         fps = fps or rate
         frames = []

@@ -6,6 +6,7 @@ import os
 import time
 from typing import Callable, Iterable
 
+from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.ros import types
 
@@ -46,7 +47,11 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     count = 0
-    with Bag(path) as bag:
+    def skipped(part: Damage) -> None:
+        if log is not None:
+            log(f'warning: skipped unreadable {part}')
+
+    with Bag(path, on_damage=skipped) as bag:
         transport = RclpyTransport(f'growspace_replay_{os.getpid()}', domain_id=domain_id)
         try:
             wanted = set(bag.topics) if topics is None else set(topics) & set(bag.topics)

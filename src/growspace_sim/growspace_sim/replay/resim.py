@@ -11,6 +11,7 @@ import numpy as np
 from growspace_sim import convert
 from growspace_sim.node.interface import digit_fingerprint
 from growspace_sim.recording import METADATA_NAME
+from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import COMPARED, Episode, StepRecord, read_episodes
 from growspace_sim.ros import types
@@ -37,10 +38,13 @@ class ResimReport:
     messages_compared: int = 0
     mismatch: Mismatch | None = None
     warnings: list[str] = dataclasses.field(default_factory=list)
+    # Episodes that could not be checked (unreadable parts of the file), each with its reason
+    unverified: list[str] = dataclasses.field(default_factory=list)
+    unreadable: list[Damage] = dataclasses.field(default_factory=list)  # parts of the file
 
     @property
     def ok(self) -> bool:
-        return self.mismatch is None and self.episodes > 0
+        return self.mismatch is None and self.episodes > 0 and not self.unverified
 
 
 def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
@@ -53,7 +57,9 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     commands are applied through ``convert.apply_command`` (in lockstep only the one whose
     step_id the result answers; in realtime mode the latest one) and the chamber steps.
     Images (bytes), plant states (node arrays, tips, counts), applied lights and rewards must
-    equal the recorded ones exactly. Stops at the first mismatch.
+    equal the recorded ones exactly. Stops at the first mismatch. An episode that an unreadable
+    part of the file touched is skipped and listed in ``unverified`` (so is a later one that
+    continues its random stream); the others are still checked.
 
     Args:
         path: The ``.mcap`` file.
@@ -79,10 +85,21 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
         source = digit_source or meta.get('digit_source') or 'auto'
         lockstep = meta.get('mode') != 'realtime'
         episodes = read_episodes(bag, namespace)
+        report.unreadable = list(bag.damage)
         if not episodes:
             raise ReplayError(f'{bag.path} holds no episode start (StepResult with step 0).')
         sim: Simulation | None = None
+        stream_known = True  # the random stream is where the recording's was
         for episode in episodes:
+            if episode.damaged or (episode.seed is None and not stream_known):
+                why = '; '.join(episode.damaged) or 'it continues the random stream of an ' \
+                    'episode that could not be checked'
+                report.unverified.append(f'episode {episode.index}: {why}')
+                stream_known = False
+                if progress is not None:
+                    progress(report.episodes + len(report.unverified), len(episodes))
+                continue
+            stream_known = True
             if episode.config is None:
                 raise ReplayError(f'{bag.path}: episode {episode.index} has no recorded config '
                                   f'(neither chamber/config nor "growspace" metadata).')
@@ -113,7 +130,7 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
                 report.steps += 1
             report.episodes += 1
             if progress is not None:
-                progress(report.episodes, len(episodes))
+                progress(report.episodes + len(report.unverified), len(episodes))
             if mismatch is not None:
                 report.mismatch = mismatch
                 break
