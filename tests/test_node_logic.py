@@ -298,6 +298,18 @@ def test_propose_rejects_invalid_changes_and_applies_valid_ones_at_reset() -> No
     assert node.cfg.episode_length == 7
 
 
+def test_a_new_rate_moves_the_realtime_timer_and_sim_time_at_once() -> None:
+    transport, node = make(SimConfig(episode_length=100), mode='realtime', rate_hz=10.0)
+    transport.advance(1.0)
+    assert len(transport.messages('step_result')) == 11  # the reset and 10 steps
+    assert node.propose({'rate_hz': 40.0}) is None and node.params.rate_hz == 40.0
+    transport.advance(1.0)
+    results = transport.messages('step_result')
+    assert len(results) == 11 + 40
+    stamps = [convert.to_ns(m.header.stamp) for m in results[-41:]]
+    assert set(np.diff(stamps)) == {25_000_000}
+
+
 class FakeRecorder:
     def __init__(self) -> None:
         self.channels: list[tuple[str, str, object]] = []

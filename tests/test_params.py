@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from growspace_sim.core import config
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.params import NodeParams, ParamError
@@ -87,3 +88,63 @@ def test_an_integer_is_accepted_for_a_float_parameter() -> None:
 def test_as_values_inverts_build() -> None:
     cfg, node = SimConfig(challenge='shape', digits=(1, 2)), NodeParams(mode='realtime')
     assert params.build(params.as_values(cfg, node)) == (cfg, node)
+
+
+# ------------------------------------------------------------------ descriptors (ros2 param describe)
+@pytest.mark.parametrize('name', sorted(config.BOUNDS))
+def test_every_bound_is_what_simconfig_enforces(name: str) -> None:
+    bounds = config.BOUNDS[name]
+    below = bounds.low if bounds.low_open else bounds.low - (1 if bounds.integer else 1e-6)
+    for bad in (below, bounds.high * 2 + 1):
+        if bad == bounds.sentinel:
+            continue
+        with pytest.raises(ValueError, match=f'^{name} must be in .*got {bad!r}'):
+            SimConfig(**{name: bad})
+
+
+def test_every_number_parameter_has_a_range() -> None:
+    for spec in params.specs():
+        if isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool):
+            assert spec.bounds is not None, spec.name
+            assert spec.bounds.sentinel == spec.default or \
+                spec.bounds.low <= spec.default <= spec.bounds.high, spec.name
+
+
+def test_specs_say_ranges_choices_rules_and_when_a_change_applies() -> None:
+    by_name = {s.name: s for s in params.specs()}
+    density = by_name['light_density']
+    assert (density.bounds.low, density.bounds.high, density.bounds.integer) == (1, 100_000, True)
+    assert density.when == 'at the next reset' and not density.read_only('lockstep')
+    width = by_name['light_width']
+    assert width.rules == ('greater than 0; '
+                           'light_width_min <= light_width <= light_width_max')
+    assert by_name['challenge'].rules == 'one of control, find_plant, fairness, shape'
+    assert by_name['setting'].rules == 'one of easy, hard'
+    assert by_name['mode'].rules == 'one of lockstep, realtime'
+    assert by_name['image_size'].bounds.sentinel == 0
+    seed = by_name['seed']
+    assert (seed.bounds.low, seed.bounds.sentinel) == (0, -1) and seed.read_only('realtime')
+    rate = by_name['rate_hz']
+    assert rate.read_only('lockstep') and not rate.read_only('realtime')
+    assert not by_name['auto_reset'].read_only('lockstep')
+    for name in ('mode', 'record_path', 'frame_id', 'image_frame_id'):
+        assert by_name[name].read_only('realtime') and 'read-only' in by_name[name].when
+
+
+@pytest.mark.parametrize('name,value,message', [
+    ('light_density', -5, r'light_density must be in \[1, 100000\], got -5'),
+    ('rate_hz', 0.0, r'rate_hz must be in \]0.0, 10000.0\], got 0.0'),
+    ('image_size', 4, r'image_size must be in \[8, 1024\] or 0, got 4'),
+    ('seed', -2, r'seed must be in \[0, 9223372036854775807\] or -1, got -2'),
+])
+def test_a_value_out_of_range_is_refused_before_ros_sees_it(name, value, message) -> None:
+    spec = next(s for s in params.specs() if s.name == name)
+    with pytest.raises(ParamError, match=message):
+        params.check_type(spec, value)
+
+
+def test_a_node_without_runtime_changes_shows_every_parameter_read_only() -> None:
+    specs = params.specs_of(SimConfig, NodeParams, runtime=False)
+    assert all(s.read_only('realtime') and s.when == 'at start-up (read-only)' for s in specs)
+    assert next(s for s in specs if s.name == 'light_density').bounds == \
+        config.BOUNDS['light_density']  # the ranges still show

@@ -23,7 +23,8 @@ import rclpy.qos
 from growspace_msgs.msg import LightCommand, ResetRequest, StepResult
 from growspace_msgs.srv import Reset
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import GetParameters, ListParameters, SetParameters
+from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
+                                SetParameters)
 from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
 import growspace_sim.registration  # noqa: F401 - registers the GrowSpace ids
 from growspace_sim.core import task as tasks
@@ -357,6 +358,41 @@ def test_set_read_only_parameter_is_refused(client: Client, name: str,
     assert get_params(client, [name], node)[0] == before
 
 
+def test_describe_gives_ranges_constraints_and_when_changes_apply(client: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    names = ['light_density', 'light_width', 'image_size', 'challenge', 'rate_hz', 'mode']
+    found = call(client, DescribeParameters, f'{node}/describe_parameters',
+                 DescribeParameters.Request(names=names)).descriptors
+    d = {x.name: x for x in found}
+    assert [(r.from_value, r.to_value, r.step) for r in d['light_density'].integer_range] \
+        == [(1, 100_000, 1)]
+    assert 'photons scattered per episode' in d['light_density'].description
+    assert d['light_density'].description.endswith('Applies at the next reset.')
+    assert not d['light_density'].read_only
+    assert [(r.from_value, r.to_value) for r in d['light_width'].floating_point_range] \
+        == [(0.0, 1.0)]
+    assert d['light_width'].additional_constraints == \
+        'greater than 0; light_width_min <= light_width <= light_width_max'
+    assert [(r.from_value, r.to_value) for r in d['image_size'].integer_range] == [(0, 1024)]
+    assert d['challenge'].additional_constraints == \
+        'one of control, find_plant, fairness, shape'
+    assert d['mode'].read_only and d['rate_hz'].read_only  # this node runs in lockstep
+    assert d['rate_hz'].description.endswith('Applies at once, in realtime mode (read-only in '
+                                             'lockstep).')
+
+
+def test_set_out_of_range_is_refused_by_the_standard_service(client: Client) -> None:
+    node = f'{NAMESPACE}/{NODE}'
+    result = set_param(client, 'light_width', ParameterValue(
+        type=ParameterType.PARAMETER_DOUBLE, double_value=1.5), node)
+    assert not result.successful and 'light_width' in result.reason and '1.5' in result.reason
+    result = set_param(client, 'light_width', ParameterValue(  # in range, but 0 is not allowed
+        type=ParameterType.PARAMETER_DOUBLE, double_value=0.0), node)
+    assert not result.successful, result
+    assert result.reason == 'light_width must be in ]0.0, 1.0], got 0.0.'
+    assert get_params(client, ['light_width'], node)[0].double_value == 0.25
+
+
 # ----------------------------------------------------------------------------- 3. realtime
 def test_realtime_mode_steps_at_rate_hz() -> None:
     ns = f'{NAMESPACE}_rt'
@@ -376,6 +412,36 @@ def test_realtime_mode_steps_at_rate_hz() -> None:
         assert all(r.step_id == 0 for r in client.results)
         stamps = [r.header.stamp.sec * 10**9 + r.header.stamp.nanosec for r in client.results]
         assert set(np.diff(stamps)) == {20_000_000}  # sim time: 1/rate_hz per step
+    finally:
+        client.close()
+        code, output = process.stop()
+    assert code == 0, output[-2000:]
+
+
+def test_realtime_rate_changes_live_and_the_timer_follows() -> None:
+    ns = f'{NAMESPACE}_rate'
+    process = NodeProcess('-p', 'mode:=realtime', '-p', 'rate_hz:=20.0',
+                          '-p', 'episode_length:=1000', namespace=ns)
+    client = Client(ns)
+    node = f'{ns}/{NODE}'
+    try:
+        client.connect()
+        assert client.spin_until(lambda: len(client.results) > 2)
+        result = set_param(client, 'rate_hz', ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=80.0), node)
+        assert result.successful, result.reason
+        client.drain(0.2)
+        client.results.clear()
+        start = time.monotonic()
+        client.drain(1.0)
+        rate = len(client.results) / (time.monotonic() - start)
+        assert 50 <= rate <= 110, rate  # was 20 Hz
+        stamps = [r.header.stamp.sec * 10**9 + r.header.stamp.nanosec for r in client.results]
+        assert set(np.diff(stamps)) == {12_500_000}  # sim time follows: 1/80 s per step
+        result = set_param(client, 'rate_hz', ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=-1.0), node)
+        assert not result.successful and 'rate_hz' in result.reason
+        assert get_params(client, ['rate_hz'], node)[0].double_value == 80.0
     finally:
         client.close()
         code, output = process.stop()

@@ -19,7 +19,7 @@ from growspace_gantry import calibration
 from growspace_gantry.controller import GrblController, Log
 from growspace_gantry.link import SerialLink
 from growspace_gantry.node import GantryNode
-from growspace_gantry.settings import GantryParams
+from growspace_gantry.settings import GANTRY_BOUNDS, GantryParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.main import make_recorder
@@ -51,7 +51,9 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         transport = RclpyTransport(NODE_NAME, args=['gantry_node', *argv],
                                    automatic_overrides=True)
         try:
-            specs = params.specs_of(SimConfig, GantryParams)
+            # Read at start-up only (read-only parameters): a rig is reconfigured by restart.
+            specs = params.specs_of(SimConfig, GantryParams, bounds=GANTRY_BOUNDS,
+                                    runtime=False)
             values, unknown = transport.declare_parameters(specs, params.check_type)
             if unknown:
                 transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '

@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 import re
 
 from growspace_sim.convert import MAX_SEED
+from growspace_sim.core.config import Bounds
 from growspace_sim.node.params import MODES, ParamError
+
+# The ranges of GantryParams' number fields: what validation checks and ROS parameters show.
+GANTRY_BOUNDS = {
+    'baud': Bounds(1, 4_000_000, integer=True), 'watchdog_s': Bounds(0.0, 1e6),
+    'lamp_power': Bounds(0.0, 1.0), 'status_hz': Bounds(0.5, 50.0),
+    'move_timeout_s': Bounds(0.1, 1e6), 'seed': Bounds(0, MAX_SEED, integer=True, sentinel=-1),
+}
 
 
 @dataclass(frozen=True)
@@ -31,19 +38,11 @@ class GantryParams:
             raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
         if not isinstance(self.port, str) or not self.port:
             raise ParamError(f'port must be a serial device path, got {self.port!r}.')
-        if isinstance(self.baud, bool) or not isinstance(self.baud, int) or self.baud <= 0:
-            raise ParamError(f'baud must be a positive integer, got {self.baud!r}.')
-        for name, low, high in (('watchdog_s', 0.0, 1e6), ('lamp_power', 0.0, 1.0),
-                                ('status_hz', 0.5, 50.0), ('move_timeout_s', 0.1, 1e6)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value) or not low <= value <= high:
-                raise ParamError(f'{name} must be a number in [{low:g}, {high:g}], '
-                                 f'got {value!r}.')
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
-                or not -1 <= self.seed <= MAX_SEED:
-            raise ParamError(f'seed must be -1 (random) or an int in [0, {MAX_SEED}], '
-                             f'got {self.seed!r}.')
+        for name, bounds in GANTRY_BOUNDS.items():
+            try:
+                bounds.check(name, getattr(self, name))
+            except ValueError as e:
+                raise ParamError(str(e)) from None
         if not isinstance(self.frame_id, str) or not re.fullmatch(r'[A-Za-z0-9_/]+',
                                                                   self.frame_id):
             raise ParamError(f'frame_id must be a frame name of letters, digits, _ and /, '

@@ -23,6 +23,82 @@ MIN_THICKNESS = 0.001  # fraction of the width: at most 1,000 canopy columns
 
 
 @dataclass(frozen=True)
+class Bounds:
+    """The values a number field allows; also its ROS parameter's range.
+
+    Attributes:
+        low: Smallest value (excluded if ``low_open``).
+        high: Largest value (included).
+        integer: Only ints are allowed (else any finite number).
+        low_open: ``low`` itself is not allowed (e.g. a fraction that must be positive).
+        sentinel: One more allowed value outside ``[low, high]`` with a meaning of its own.
+    """
+
+    low: float
+    high: float
+    integer: bool = False
+    low_open: bool = False
+    sentinel: int | None = None
+
+    def __str__(self) -> str:
+        return f'{"]" if self.low_open else "["}{self.low}, {self.high}]'
+
+    def check(self, name: str, value: object) -> None:
+        """Raise ``ValueError`` naming the field, the value and what is allowed."""
+        kind = int if self.integer else (int, float)
+        if isinstance(value, bool) or not isinstance(value, kind):
+            raise ValueError(f'{name} must be {"an int" if self.integer else "a number"}, '
+                             f'got {value!r}.')
+        if self.sentinel is not None and value == self.sentinel:
+            return
+        if not math.isfinite(value) or value > self.high or value < self.low \
+                or (self.low_open and value == self.low):
+            also = '' if self.sentinel is None else f' or {self.sentinel}'
+            raise ValueError(f'{name} must be in {self}{also}, got {value!r}.')
+
+
+_FRACTION = Bounds(0.0, 1.0, low_open=True)  # a positive fraction of the width or height
+# The bounds of SimConfig's number fields: what __post_init__ checks and ROS parameters show.
+BOUNDS = {
+    'chamber_width': Bounds(0.01, 100.0), 'chamber_height': Bounds(0.01, 100.0),
+    'image_size': Bounds(8, 1024, integer=True, sentinel=0),
+    'episode_length': Bounds(1, 100_000, integer=True),
+    'light_density': Bounds(1, 100_000, integer=True),
+    'photon_min_height': _FRACTION, 'first_branch_height': _FRACTION,
+    'branch_length': _FRACTION,
+    # The canopy has one column per branch thickness: a floor keeps it small.
+    'branch_thickness': Bounds(MIN_THICKNESS, 1.0),
+    'max_branching': Bounds(1, 100, integer=True),
+    'radius_of_influence': _FRACTION, 'kill_distance': _FRACTION, 'light_width': _FRACTION,
+    'light_width_min': _FRACTION, 'light_width_max': _FRACTION,
+    'light_step_px': Bounds(0.0, REFERENCE_IMAGE_SIZE, low_open=True),
+    'spot_radius': _FRACTION, 'spot_radius_min': _FRACTION, 'spot_radius_max': _FRACTION,
+    'target_radius': _FRACTION, 'n_plants': Bounds(1, 16, integer=True),
+    'shape_success': _FRACTION,
+}
+# The rules that join fields, in words, by field (ROS shows them as additional constraints).
+RULES = {
+    **dict.fromkeys(('light_width_min', 'light_width', 'light_width_max'),
+                    'light_width_min <= light_width <= light_width_max'),
+    **dict.fromkeys(('spot_radius_min', 'spot_radius', 'spot_radius_max'),
+                    'spot_radius_min <= spot_radius <= spot_radius_max'),
+    **dict.fromkeys(('kill_distance', 'radius_of_influence'),
+                    'kill_distance < radius_of_influence'),
+    **dict.fromkeys(('first_branch_height', 'chamber_height'),
+                    'first_branch_height x chamber_width < chamber_height'),
+    **dict.fromkeys(('max_branching', 'episode_length'),
+                    f'max_branching x episode_length <= {MAX_NODES}'),
+    'image_size': '0 = the challenge\'s default (84, or 28 for shape)',
+    'digits': 'each 0..9; empty = the setting\'s digit (easy 3, hard 0)',
+}
+
+
+def choices(name: str) -> tuple[str, ...]:
+    """The allowed values of a string field of SimConfig (empty for other fields)."""
+    return {'challenge': tasks.names(), 'setting': SETTINGS}.get(name, ())
+
+
+@dataclass(frozen=True)
 class SimConfig:
     """Everything that defines a chamber run, validated on construction.
 
@@ -62,27 +138,13 @@ class SimConfig:
             raise ValueError(f'challenge must be one of {tasks.names()}, got {self.challenge!r}.')
         task = tasks.get(self.challenge)
         _check_choice('setting', self.setting, task.settings)
-        for name in ('chamber_width', 'chamber_height'):
-            _check_range(name, getattr(self, name), 0.01, 100.0)
-        if self.image_size != 0:
-            _check_range('image_size', self.image_size, 8, 1024, integer=True)
-        _check_range('episode_length', self.episode_length, 1, 100_000, integer=True)
-        _check_range('light_density', self.light_density, 1, 100_000, integer=True)
-        _check_range('max_branching', self.max_branching, 1, 100, integer=True)
+        for name, bounds in BOUNDS.items():
+            bounds.check(name, getattr(self, name))
         if self.max_branching * self.episode_length > MAX_NODES:
             raise ValueError(
                 f'max_branching x episode_length ({self.max_branching} x {self.episode_length}'
                 f' = {self.max_branching * self.episode_length}) must be in [1, {MAX_NODES}]: '
                 f'the chamber keeps room for every node an episode can grow.')
-        # The canopy has one column per branch thickness: a floor keeps it small.
-        _check_range('branch_thickness', self.branch_thickness, MIN_THICKNESS, 1.0)
-        for name in ('photon_min_height', 'first_branch_height', 'branch_length',
-                     'radius_of_influence', 'kill_distance', 'light_width',
-                     'light_width_min', 'light_width_max', 'spot_radius', 'spot_radius_min',
-                     'spot_radius_max', 'target_radius', 'shape_success'):
-            _check_range(name, getattr(self, name), 0.0, 1.0, low_open=True)
-        _check_range('light_step_px', self.light_step_px, 0.0, REFERENCE_IMAGE_SIZE,
-                     low_open=True)
         if not isinstance(self.shading, bool):
             raise ValueError(f'shading must be a bool, got {self.shading!r}.')
         _check_order('light_width_min', self.light_width_min, 'light_width',
@@ -97,7 +159,6 @@ class SimConfig:
             raise ValueError(
                 f'first_branch_height ({self.first_branch_height} of the width) must end below '
                 f'the chamber top ({self.chamber_height} m).')
-        _check_range('n_plants', self.n_plants, 1, 16, integer=True)
         if not isinstance(self.digits, tuple) or not all(
                 isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= 9
                 for d in self.digits):
@@ -166,17 +227,6 @@ class SimConfig:
 def _check_choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
     if value not in allowed:
         raise ValueError(f'{name} must be one of {allowed}, got {value!r}.')
-
-
-def _check_range(name: str, value: object, low: float, high: float, *, integer: bool = False,
-                 low_open: bool = False) -> None:
-    kind = int if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kind):
-        expected = 'an int' if integer else 'a number'
-        raise ValueError(f'{name} must be {expected}, got {value!r}.')
-    if not math.isfinite(value) or value > high or value < low or (low_open and value == low):
-        bracket = ']' if low_open else '['
-        raise ValueError(f'{name} must be in {bracket}{low}, {high}], got {value!r}.')
 
 
 def _check_order(low_name: str, low: float, mid_name: str, mid: float, high_name: str,

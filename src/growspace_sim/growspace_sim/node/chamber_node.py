@@ -136,8 +136,8 @@ class ChamberNode:
         for key, topic, typename, qos in INPUTS:
             transport.subscribe(typename, topic, qos, handlers[key])
         transport.serve(RESET_SRV, 'reset', self.on_reset_service)
-        if self.params.mode == 'realtime':
-            transport.create_timer(1.0 / self.params.rate_hz, self.tick)
+        self._timer = transport.create_timer(1.0 / self.params.rate_hz, self.tick) \
+            if self.params.mode == 'realtime' else None
         seed = self.params.seed if self.params.seed >= 0 else secrets.randbits(63)
         self._start_recording(seed)
         self._reset(seed, cfg, reset_id=0)
@@ -195,7 +195,9 @@ class ChamberNode:
         return None
 
     def propose(self, values: dict[str, Any]) -> str | None:
-        """Validate changed parameter values; valid SimConfig changes apply at the next reset.
+        """Validate changed parameter values. Valid SimConfig changes apply at the next reset;
+        ``rate_hz`` (realtime mode: the timer follows, and sim time per step) and
+        ``auto_reset`` at once. The others are read-only (refused before this is called).
 
         Returns:
             None if accepted, else the reason (names the parameter, value and what is allowed).
@@ -207,7 +209,9 @@ class ChamberNode:
         except ParamError as e:
             return str(e)
         self.pending_cfg = cfg if cfg != self.cfg else None
-        self.params = dataclasses.replace(self.params, seed=params.seed,
+        if self._timer is not None and params.rate_hz != self.params.rate_hz:
+            self._timer.set_period(1.0 / params.rate_hz)
+        self.params = dataclasses.replace(self.params, rate_hz=params.rate_hz,
                                           auto_reset=params.auto_reset)
         return None
 

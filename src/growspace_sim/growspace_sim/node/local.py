@@ -20,6 +20,21 @@ from growspace_sim.node.transport import (
 from growspace_sim.ros import names, qos as ros_qos, types
 
 
+class LocalTimer:
+    """A timer on a ``LocalTransport``'s simulated clock."""
+
+    def __init__(self, transport: LocalTransport, period_s: float,
+                 callback: Callable[[], None]) -> None:
+        self._transport = transport
+        self.period_s = period_s
+        self.due = transport.time_s + period_s  # simulated time of the next call [s]
+        self.callback = callback
+
+    def set_period(self, period_s: float) -> None:
+        self.period_s = period_s
+        self.due = self._transport.time_s + period_s
+
+
 class LocalTransport:
     """``Transport`` in process.
 
@@ -45,7 +60,7 @@ class LocalTransport:
         self._accept_services = services
         self._types: dict[str, str] = {}
         self._subs: dict[str, list[tuple[str, Callable[..., None]]]] = defaultdict(list)
-        self._timers: list[list[Any]] = []  # [period, due, callback]
+        self._timers: list[LocalTimer] = []
         self._resolved: dict[str, str] = {}
 
     def resolve(self, topic: str) -> str:
@@ -86,9 +101,10 @@ class LocalTransport:
             self.services[name] = handler
         return self._accept_services
 
-    def create_timer(self, period_s: float, callback: Callable[[], None]) -> None:
-        self._timers.append([period_s, self.time_s + period_s,
-                             guarded(self.logger, 'timer', callback)])
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> LocalTimer:
+        timer = LocalTimer(self, period_s, guarded(self.logger, 'timer', callback))
+        self._timers.append(timer)
+        return timer
 
     def spin_once(self, timeout_s: float) -> None:
         self.advance(timeout_s)
@@ -98,12 +114,12 @@ class LocalTransport:
         end = self.time_s + seconds
         fired = 0
         while self._timers:
-            timer = min(self._timers, key=lambda t: t[1])
-            if timer[1] > end + 1e-12:
+            timer = min(self._timers, key=lambda t: t.due)
+            if timer.due > end + 1e-12:
                 break
-            self.time_s = timer[1]
-            timer[1] += timer[0]
-            timer[2]()
+            self.time_s = timer.due
+            timer.due += timer.period_s
+            timer.callback()
             fired += 1
         self.time_s = end
         return fired

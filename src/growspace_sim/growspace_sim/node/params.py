@@ -12,18 +12,28 @@ import dataclasses
 from dataclasses import dataclass
 import functools
 import inspect
-import math
 import re
 from typing import Any
 
 import yaml
 
 from growspace_sim.convert import MAX_SEED
-from growspace_sim.core.config import SimConfig
+from growspace_sim.core import config as sim_config
+from growspace_sim.core.config import Bounds, SimConfig
 
 MODES = ('lockstep', 'realtime')
 DEFAULT_NODE_NAME = 'growspace_sim'
 MAX_RATE_HZ = 10_000.0
+FRAME_RULE = 'a frame name of letters, digits, _ and /'
+NODE_BOUNDS = {'rate_hz': Bounds(0.0, MAX_RATE_HZ, low_open=True),
+               'seed': Bounds(0, MAX_SEED, integer=True, sentinel=-1)}
+NODE_RULES = {'seed': '-1 = draw a seed at random (it is published)',
+              'frame_id': FRAME_RULE, 'image_frame_id': FRAME_RULE}
+# When a change takes effect; the node's parameter descriptors say it. SimConfig fields apply
+# at the next reset (the episode under way keeps its chamber), these at once, the rest
+# (read-only) at start-up.
+LIVE = frozenset({'rate_hz', 'auto_reset'})
+REALTIME_ONLY = frozenset({'rate_hz'})  # in lockstep, sim time per step stays as recorded
 
 
 class ParamError(ValueError):
@@ -45,14 +55,11 @@ class NodeParams:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
-        if isinstance(self.rate_hz, bool) or not isinstance(self.rate_hz, (int, float)) \
-                or not math.isfinite(self.rate_hz) or not 0 < self.rate_hz <= MAX_RATE_HZ:
-            raise ParamError(f'rate_hz must be a number in ]0, {MAX_RATE_HZ}], '
-                             f'got {self.rate_hz!r}.')
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
-                or not -1 <= self.seed <= MAX_SEED:
-            raise ParamError(f'seed must be -1 (random) or an int in [0, {MAX_SEED}], '
-                             f'got {self.seed!r}.')
+        for name, bounds in NODE_BOUNDS.items():
+            try:
+                bounds.check(name, getattr(self, name))
+            except ValueError as e:
+                raise ParamError(str(e)) from None
         if not isinstance(self.auto_reset, bool):
             raise ParamError(f'auto_reset must be a bool, got {self.auto_reset!r}.')
         for name in ('frame_id', 'image_frame_id'):
@@ -71,12 +78,34 @@ class NodeParams:
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One ROS parameter: its name, default, and description (with unit)."""
+    """One ROS parameter: its name, default, description (with unit) and constraints."""
 
     name: str
     default: Any
     description: str
     owner: type  # SimConfig or NodeParams
+    bounds: Bounds | None = None  # numbers: the range (a ROS integer or floating-point range)
+    rules: str = ''  # what else is allowed, in words (ROS additional_constraints)
+    runtime: bool = True  # the node takes changes while it runs (sim_node; not gantry_node)
+
+    @property
+    def when(self) -> str:
+        """When a new value takes effect."""
+        if not self.runtime:
+            return 'at start-up (read-only)'
+        if self.owner is SimConfig:
+            return 'at the next reset'
+        if self.name in REALTIME_ONLY:
+            return 'at once, in realtime mode (read-only in lockstep)'
+        return 'at once' if self.name in LIVE else 'at start-up (read-only)'
+
+    def read_only(self, mode: str) -> bool:
+        """Whether the running node refuses changes (in ``mode``)."""
+        if not self.runtime:
+            return True
+        if self.owner is SimConfig:
+            return False
+        return self.name not in LIVE or (self.name in REALTIME_ONLY and mode != 'realtime')
 
 
 @functools.cache
@@ -95,21 +124,41 @@ def _field_comments(cls: type) -> dict[str, str]:
     return found
 
 
-def specs_of(*classes: type) -> tuple[ParamSpec, ...]:
+def specs_of(*classes: type, bounds: dict[str, Bounds] | None = None,
+             rules: dict[str, str] | None = None,
+             runtime: bool = True) -> tuple[ParamSpec, ...]:
     """The parameters of some dataclasses, in class and field order (the gantry node adds its
-    own settings class to SimConfig this way)."""
+    own settings class to SimConfig this way).
+
+    Args:
+        classes: The dataclasses; SimConfig's bounds and rules are known here.
+        bounds: The number ranges of the other classes' fields, by name.
+        rules: Other constraints of their fields, in words, by name.
+        runtime: False for a node that reads its parameters at start-up only: every one is
+            read-only then.
+    """
+    all_bounds = {**sim_config.BOUNDS, **(bounds or {})}
+    all_rules = {**sim_config.RULES, **(rules or {})}
     out = []
     for cls in classes:
         comments = _field_comments(cls)
         for field in dataclasses.fields(cls):
-            out.append(ParamSpec(field.name, field.default, comments.get(field.name, ''), cls))
+            name = field.name
+            allowed = sim_config.choices(name) if cls is SimConfig else \
+                (MODES if name == 'mode' else ())
+            text = '; '.join(filter(None, (
+                f'one of {", ".join(allowed)}' if allowed else '',
+                'greater than 0' if name in all_bounds and all_bounds[name].low_open else '',
+                all_rules.get(name, ''))))
+            out.append(ParamSpec(name, field.default, comments.get(name, ''), cls,
+                                 all_bounds.get(name), text, runtime))
     return tuple(out)
 
 
 @functools.cache
 def specs() -> tuple[ParamSpec, ...]:
     """Every parameter of the node: SimConfig fields first, then NodeParams, in field order."""
-    return specs_of(SimConfig, NodeParams)
+    return specs_of(SimConfig, NodeParams, bounds=NODE_BOUNDS, rules=NODE_RULES)
 
 
 def defaults() -> dict[str, Any]:
@@ -119,7 +168,8 @@ def defaults() -> dict[str, Any]:
 
 
 def check_type(spec: ParamSpec, value: Any) -> Any:
-    """Coerce a YAML value to the parameter's type as ROS would, or raise ParamError."""
+    """Coerce a YAML value to the parameter's type as ROS would, or raise ParamError (also for
+    a number outside the parameter's range)."""
     default = spec.default
     if isinstance(default, bool):
         ok = isinstance(value, bool)
@@ -142,6 +192,11 @@ def check_type(spec: ParamSpec, value: Any) -> Any:
         expected = 'a list of integers'
     if not ok:
         raise ParamError(f'{spec.name} must be {expected}, got {value!r}.')
+    if spec.bounds is not None:  # ROS would refuse to declare it out of its range
+        try:
+            spec.bounds.check(spec.name, value)
+        except ValueError as e:
+            raise ParamError(str(e)) from None
     return value
 
 
@@ -159,7 +214,7 @@ def build(values: dict[str, Any], settings: type = NodeParams) -> tuple[SimConfi
         ParamError: one line naming the parameter, its value and what is allowed.
     """
     by_name = {s.name: s for s in (specs() if settings is NodeParams else
-                                   specs_of(SimConfig, settings))}
+                                   specs_of(SimConfig, settings, runtime=False))}
     unknown = sorted(set(values) - set(by_name))
     if unknown:
         raise ParamError(f'unknown parameter(s) {unknown}; allowed: {sorted(by_name)}.')

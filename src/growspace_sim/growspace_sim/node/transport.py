@@ -70,6 +70,13 @@ class ThrottledLogger:
             pass
 
 
+class Timer(Protocol):
+    """A periodic callback a transport created."""
+
+    def set_period(self, period_s: float) -> None:
+        """Call the callback every ``period_s`` seconds from now on [s]."""
+
+
 class Transport(Protocol):
     """What the node needs from a middleware: typed pub/sub with CDR bytes, timers, a clock."""
 
@@ -94,7 +101,7 @@ class Transport(Protocol):
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         """Offer a service; returns False where the middleware cannot."""
 
-    def create_timer(self, period_s: float, callback: Callable[[], None]) -> None:
+    def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """Call ``callback`` every ``period_s`` seconds while spinning."""
 
     def spin_once(self, timeout_s: float) -> None:
