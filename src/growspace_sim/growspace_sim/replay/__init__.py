@@ -4,11 +4,15 @@
 - ``info BAG``: episodes, returns, steps, duration, messages per topic;
 - ``check BAG``: re-simulate every episode from the recorded config, seed and commands and
   report whether every image, plant state, applied light and reward is bit-identical (exit 0)
-  or the first mismatch (exit 1);
+  or the first mismatch, or the episodes an unreadable part of the file kept from being
+  checked (exit 1);
 - ``export BAG OUT.gif|OUT.mp4``: one episode's camera images, with a progress bar;
 - ``play BAG``: republish the messages on their topics over rclpy, with the recorded timing or
   as fast as possible (``ros2 bag play`` where rosbag2 is not installed);
-- ``recover BAG OUT``: copy the complete chunks of a file cut short by a crash.
+- ``recover BAG OUT``: copy every readable chunk of a file cut short by a crash or damaged,
+  and say what was skipped.
+
+An unreadable chunk never stops a reader: it is skipped and named (``Bag.damage``).
 
 Messages are read in file order, which is the order the node handled them in (the topics and
 their order are ``node.interface``; the episode structure is in ``docs/recording.md``).
