@@ -20,6 +20,7 @@ from growspace_gym_bridge.link import ChamberLink
 from growspace_sim import convert
 from growspace_sim.node.interface import COMMAND_QOS
 from growspace_sim.node.rclpy_transport import RclpyTransport
+from growspace_sim.replay import compare, format_comparison
 from growspace_sim.ros import types
 from ros_helpers import NodeProcess
 from test_gantry_node import RIG
@@ -103,6 +104,7 @@ def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
     with GrblEmulator(RIG, speedup=400.0, link_dir=tmp_path) as grbl:
         node = NodeProcess('-p', f'port:={grbl.port}', '-p', 'seed:=2024', '-p',
                            'challenge:=control', '-p', 'setting:=hard', '-p', 'status_hz:=50.0',
+                           '-p', f'record_path:={tmp_path / "hardware.mcap"}',
                            namespace='/growspace',
                            executable=gantry_executable())
         listener = RclpyTransport('replay_listener', '/growspace')
@@ -136,8 +138,11 @@ def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
     errors = np.array([[abs(reached[i].x - sim_lights[i].x), abs(reached[i].width -
                                                                  sim_lights[i].width)]
                        for i in range(1, 51)]) * 1000.0  # mm
-    print(f'replay onto the emulated gantry, 50 steps: x max {errors[:, 0].max():.3f} mm, '
-          f'RMS {np.sqrt((errors[:, 0] ** 2).mean()):.3f} mm; width max '
-          f'{errors[:, 1].max():.3f} mm, RMS {np.sqrt((errors[:, 1] ** 2).mean()):.3f} mm')
+    # The same figures from the two recordings, as a user gets them after a hardware replay.
+    result = compare(bag, tmp_path / 'hardware.mcap')
+    print(format_comparison(result))
+    assert result.steps >= 50 and not result.skipped, format_comparison(result)
+    assert result.errors['x'].max_abs * 1000.0 == pytest.approx(errors[:, 0].max(), abs=1e-9)
     assert errors[:, 0].max() <= 0.05 + 1e-6  # position_tolerance_mm of the calibration
     assert errors[:, 1].max() <= 2 * 0.05 + 1e-6  # width = 2 x lamp height above the canopy
+    assert result.within(2 * 0.05e-3 + 1e-9)

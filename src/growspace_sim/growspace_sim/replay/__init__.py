@@ -9,6 +9,8 @@
 - ``export BAG OUT.gif|OUT.mp4``: one episode's camera images, with a progress bar;
 - ``play BAG``: republish the messages on their topics over rclpy, with the recorded timing or
   as fast as possible (``ros2 bag play`` where rosbag2 is not installed);
+- ``compare A B``: the applied light of B against A step by step, max and RMS per field (a
+  simulated run and the same commands replayed onto the LED gantry);
 - ``recover BAG OUT``: copy every readable chunk of a file cut short by a crash or damaged,
   and say what was skipped.
 
@@ -18,18 +20,21 @@ Messages are read in file order, which is the order the node handled them in (th
 their order are ``node.interface``; the episode structure is in ``docs/recording.md``).
 
 Modules, one job each: ``bag`` (reading), ``episodes`` (episode structure, summary), ``resim``
-(bit-for-bit re-simulation), ``export`` (GIF/MP4), ``play`` (republishing over rclpy) and
-``cli`` (``growspace-replay``, also ``python -m growspace_sim.replay``).
+(bit-for-bit re-simulation), ``export`` (GIF/MP4), ``play`` (republishing over rclpy),
+``compare`` (two runs' applied light) and ``cli`` (``growspace-replay``, also ``python -m
+growspace_sim.replay``).
 """
 
 from growspace_sim.replay.bag import Bag, BagMessage, ReplayError, TopicInfo
 from growspace_sim.replay.cli import main
+from growspace_sim.replay.compare import compare, Comparison, format_comparison
 from growspace_sim.replay.episodes import (
     Episode, StepRecord, format_summary, read_episodes, summary)
 from growspace_sim.replay.export import export_episode
 from growspace_sim.replay.play import play
 from growspace_sim.replay.resim import COMPARED, Mismatch, ResimReport, resimulate
 
-__all__ = ['Bag', 'BagMessage', 'COMPARED', 'Episode', 'Mismatch', 'ReplayError', 'ResimReport',
-           'StepRecord', 'TopicInfo', 'export_episode', 'format_summary', 'main', 'play',
-           'read_episodes', 'resimulate', 'summary']
+__all__ = ['Bag', 'BagMessage', 'COMPARED', 'Comparison', 'Episode', 'Mismatch', 'ReplayError',
+           'ResimReport', 'StepRecord', 'TopicInfo', 'compare', 'export_episode',
+           'format_comparison', 'format_summary', 'main', 'play', 'read_episodes', 'resimulate',
+           'summary']

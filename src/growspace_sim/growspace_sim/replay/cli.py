@@ -1,4 +1,4 @@
-"""``growspace-replay``: info, check, export, play and recover from the command line."""
+"""``growspace-replay``: info, check, export, play, compare and recover from the command line."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from tqdm import tqdm
 
 from growspace_sim import recording
 from growspace_sim.replay.bag import ReplayError
+from growspace_sim.replay.compare import compare, format_comparison
 from growspace_sim.replay.episodes import format_summary, summary
 from growspace_sim.replay.export import export_episode
 from growspace_sim.replay.play import play
@@ -49,7 +50,15 @@ def main(argv: list[str] | None = None) -> int:
     p_play.add_argument('--domain-id', type=int, help='default: ROS_DOMAIN_ID')
     p_play.add_argument('--wait', type=float, default=1.0,
                         help='seconds to wait for subscribers first')
-    p_recover = sub.add_parser('recover', help='copy the complete chunks of a damaged file')
+    p_compare = sub.add_parser('compare', help='applied light of B against A, step by step '
+                                               '(e.g. a simulated run and its gantry replay)')
+    p_compare.add_argument('a', help='the reference recording')
+    p_compare.add_argument('b', help='the recording to compare with it')
+    p_compare.add_argument('--namespace-a')
+    p_compare.add_argument('--namespace-b')
+    p_compare.add_argument('--tolerance-mm', type=float,
+                           help='exit 1 if any field of B is farther than this from A')
+    p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')
     p_recover.add_argument('bag')
     p_recover.add_argument('out')
     args = parser.parse_args(argv)
@@ -97,6 +106,17 @@ def main(argv: list[str] | None = None) -> int:
                          log=lambda line: print(line, file=sys.stderr),
                          step_period_s=args.step_period)
             print(f'published {n} messages')
+        elif args.command == 'compare':
+            result = compare(args.a, args.b, namespace_a=args.namespace_a,
+                             namespace_b=args.namespace_b)
+            print(format_comparison(result))
+            if result.steps == 0:
+                print('growspace-replay: error: no step of A and B could be compared',
+                      file=sys.stderr)
+                return 1
+            if args.tolerance_mm is not None and not result.within(args.tolerance_mm / 1e3):
+                print(f'OUT OF TOLERANCE: a field differs by more than {args.tolerance_mm} mm')
+                return 1
         elif args.command == 'recover':
             rep = recording.recover(args.bag, args.out)
             state = 'file was complete' if rep.complete else f'stopped at byte {rep.stopped_at}' \

@@ -42,7 +42,9 @@ class Episode:
     steps: list[StepRecord]  # steps[0] is the reset
     # StepResults answered without a step: rejected commands or resets, commands after the end
     rejected: list[Any] = dataclasses.field(default_factory=list)
-    start_lost: bool = False  # its reset was in an unreadable part: steps[0] is a later step
+    # False: steps[0] is a step, not the reset (its reset published no observation, as
+    # gantry_node's start-up does not, or it was in an unreadable part of the file)
+    reset_recorded: bool = True
     gaps: list[str] = dataclasses.field(default_factory=list)  # steps or reset missing
     unreadable: list[Damage] = dataclasses.field(default_factory=list)  # lost parts it overlaps
 
@@ -53,11 +55,11 @@ class Episode:
 
     @property
     def n_steps(self) -> int:
-        return len(self.steps) - (0 if self.start_lost else 1)
+        return len(self.steps) - (1 if self.reset_recorded else 0)
 
     @property
     def episode_return(self) -> float:
-        return float(sum(s.result.reward for s in self.steps[0 if self.start_lost else 1:]))
+        return float(sum(s.result.reward for s in self.steps[1 if self.reset_recorded else 0:]))
 
     @property
     def done(self) -> bool:
@@ -79,7 +81,9 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
 
     Where the file has unreadable parts (``Bag.damage``), every episode they touch lists why in
     ``Episode.damaged``: the byte offset of the lost chunk, steps missing from the numbering, a
-    reset that was lost (the steps after it form an episode with ``start_lost``).
+    reset that was lost (the steps after it form an episode with ``reset_recorded`` False).
+    Steps from step 1 on after a node's ``chamber/config`` but before any reset result form
+    the node's first episode (gantry_node does not move, so publishes no reset, at start-up).
 
     Args:
         bag: The open recording.
@@ -148,10 +152,16 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
                 if result.step != expected:
                     last.gaps.append(f'steps {expected}-{result.step - 1} missing')
                 last.steps.append(record)
+            elif not episodes and result.step == 1 and fresh_config is not None:
+                cfg = _config_from_json(fresh_config.get('config')) or cfg
+                seed = fresh_config.get('seed')
+                fresh_config = None
+                episodes.append(Episode(0, int(result.reset_id), cfg, seed, True, [record],
+                                        reset_recorded=False))
             elif episodes or bag.damage:  # the reset of this step's episode was lost
                 episodes.append(Episode(
                     len(episodes), int(result.reset_id), cfg, None, False, [record],
-                    start_lost=True,
+                    reset_recorded=False,
                     gaps=[f'its reset and the steps before step {result.step} missing']))
     _attribute_damage(bag, episodes)
     return episodes

@@ -120,8 +120,9 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
                     report.warnings.append(f'the shape digits differ from the recorded ones '
                                            f'(source {source!r}); images will not match.')
             outcome = sim.reset(seed=episode.seed)
-            mismatch = _compare_step(sim, outcome, episode, episode.steps[0], report)
-            for record in episode.steps[1:]:
+            mismatch = _compare_step(sim, outcome, episode, episode.steps[0], report) \
+                if episode.reset_recorded else None
+            for record in episode.steps[1 if episode.reset_recorded else 0:]:
                 if mismatch is not None:
                     break
                 _apply_command(sim, record, lockstep)
