@@ -90,7 +90,7 @@ def test_as_values_inverts_build() -> None:
     assert params.build(params.as_values(cfg, node)) == (cfg, node)
 
 
-# ------------------------------------------------------------------ descriptors (ros2 param describe)
+# ---------------------------------------------------------- descriptors (ros2 param describe)
 @pytest.mark.parametrize('name', sorted(config.BOUNDS))
 def test_every_bound_is_what_simconfig_enforces(name: str) -> None:
     bounds = config.BOUNDS[name]

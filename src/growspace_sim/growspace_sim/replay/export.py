@@ -49,6 +49,7 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         raise ReplayError(f'{out} exists already, not overwriting.')
     if scale < 1:
         raise ReplayError(f'scale must be >= 1, got {scale}.')
+
     def skipped(part: Damage) -> None:
         if warn is not None:
             warn(f'skipped unreadable {part}')

@@ -47,6 +47,7 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     count = 0
+
     def skipped(part: Damage) -> None:
         if log is not None:
             log(f'warning: skipped unreadable {part}')
