@@ -172,7 +172,8 @@ class Scene:
         for name, values in (('node_x', x), ('node_z', z)):
             bad = ~np.isfinite(values)
             if bad.any():
-                raise ViewInputError('plant/state', name, values[bad][0], 'finite numbers [m]')
+                raise ViewInputError('plant/state', name, float(values[bad][0]),
+                                     'finite numbers [m]')
         parent = np.asarray(msg.parent, np.int64)
         bad = (parent < -1) | (parent >= np.arange(n))
         if bad.any():

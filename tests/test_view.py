@@ -1,0 +1,436 @@
+"""The view: markers and view image of known plants, view_node over rclpy, Foxglove WebSocket.
+
+Pure tests build frames with ``Scene`` from messages built in process (``view.sample``); the
+ROS tests start the installed ``sim_node`` and ``view_node`` in a namespace of their own and
+read with rclpy clients using the generated classes; the Foxglove tests speak the
+``foxglove.websocket.v1`` protocol with the ``websockets`` library and decode with our codec.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import secrets
+import socket
+import struct
+import time
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+
+from growspace_sim import convert
+from growspace_sim.core.config import SimConfig
+from growspace_sim.node.interface import STRING, config_json
+from growspace_sim.ros import types
+from growspace_sim.simulation import Simulation
+from growspace_sim.view import markers, Scene, ViewInputError
+from growspace_sim.view.image import PLANT_COLOURS, ViewRenderer
+from growspace_sim.view.sample import episode_messages, feed
+
+W = H = 0.84
+TWIG = 0.015 * W  # branch_thickness x chamber width [m]
+
+
+# ----------------------------------------------------------------------------- helpers
+def plant_state(x: list[float], z: list[float], parent: list[int], plant: list[int] | None = None,
+                stamp_ns: int = 1_000, step: int = 0) -> Any:
+    n = len(x)
+    return types.new(types.PLANT_STATE, header=convert.header(stamp_ns, 'chamber'), step=step,
+                     node_x=x, node_z=z, parent=parent, plant=plant or [0] * n, tips=[],
+                     branch_count=[])
+
+
+def light_state(x: float, width: float = 0.2, stamp_ns: int = 1_000, spot: bool = False,
+                z: float = 0.0, radius: float = 0.0) -> Any:
+    return types.new(types.LIGHT_COMMAND, header=convert.header(stamp_ns, 'chamber'),
+                     mode=convert.MODE_SPOT if spot else convert.MODE_BEAM, x=x, z=z,
+                     width=width, radius=radius)
+
+
+def result(step: int = 0, stamp_ns: int = 1_000, reward: float = 0.5) -> Any:
+    return types.new(types.STEP_RESULT, header=convert.header(stamp_ns, 'chamber'), step=step,
+                     reward=reward, plant_rewards=[reward])
+
+
+def stem_frame(step: int = 0) -> Any:
+    """A frame of one straight stem at x = 0.21 m: root, 0.168 m, 0.252 m (no config)."""
+    scene = Scene()
+    scene.on_plant(plant_state([0.21, 0.21, 0.21], [0.0, 0.168, 0.252], [-1, 0, 1], step=step))
+    scene.on_light(light_state(0.3, 0.2))
+    return scene.on_result(result(step))
+
+
+def frames(cfg: SimConfig, seed: int, steps: int | None = None, scene: Scene | None = None,
+           **kwargs: Any) -> list[Any]:
+    scene = scene or Scene()
+    out = []
+    for topic, msg in episode_messages(cfg, seed, steps, **kwargs):
+        frame = feed(scene, topic, msg)
+        if frame is not None:
+            out.append(frame)
+    return out
+
+
+def by_key(array: Any) -> dict[tuple[str, int], Any]:
+    return {(m.ns, m.id): m for m in array.markers if m.action != markers.DELETEALL}
+
+
+# ----------------------------------------------------------------------------- markers
+def test_markers_of_a_known_stem_in_metres() -> None:
+    array = markers.marker_array(stem_frame())
+    ms = array.markers
+    assert ms[0].action == markers.DELETEALL and ms[0].header.frame_id == 'chamber'
+    assert [(m.ns, m.id) for m in ms[1:]] == list(markers.FIXED_IDS) + [('plant', 0)]
+    found = by_key(array)
+    walls = found['chamber', 0]
+    assert walls.type == markers.LINE_STRIP
+    assert [(p.x, p.y, p.z) for p in walls.points] == [
+        (0, 0, 0), (W, 0, 0), (W, 0, H), (0, 0, H), (0, 0, 0)]
+    beam = found['light', 0]
+    assert beam.type == markers.CUBE and beam.color.a < 1.0  # translucent
+    assert (beam.pose.position.x, beam.pose.position.y, beam.pose.position.z) == (0.3, 0, H / 2)
+    assert (beam.scale.x, beam.scale.z) == (0.2, H)
+    # No config: target and photons unknown, sent as DELETEs of their ids.
+    assert found['target', 0].action == markers.DELETE
+    assert found['photons', 0].action == found['photons', 1].action == markers.DELETE
+    plant = found['plant', 0]
+    assert plant.type == markers.TRIANGLE_LIST and len(plant.points) == 2 * 12
+    pts = np.array([(p.x, p.y, p.z) for p in plant.points])
+    # Segment 0 -> 1 has one node above it: thickness = twig x cbrt(2); 1 -> 2 is a twig.
+    first, second = pts[:12], pts[12:]
+    assert np.allclose(sorted(set(np.round(first[:6, 0], 9))),
+                       [0.21 - TWIG * 2 ** (1 / 3) / 2, 0.21 + TWIG * 2 ** (1 / 3) / 2])
+    assert np.allclose(first[:6, 1], 0.0) and set(np.round(first[:, 2], 9)) == {0.0, 0.168}
+    assert np.allclose(sorted(set(np.round(second[6:, 1], 9))), [-TWIG / 2, TWIG / 2])
+    assert set(np.round(second[:, 2], 9)) == {0.168, 0.252}
+    # Every marker survives our codec (what goes on the wire; colours are float32 there).
+    cdr = types.serialize(array, markers.MARKER_ARRAY)
+    back = types.deserialize(cdr, markers.MARKER_ARRAY)
+    assert types.serialize(back, markers.MARKER_ARRAY) == cdr
+    assert [(m.ns, m.id, len(m.points)) for m in back.markers] == [
+        (m.ns, m.id, len(m.points)) for m in ms]
+
+
+def test_spotlight_is_a_disc_facing_the_viewer() -> None:
+    scene = Scene()
+    scene.on_plant(plant_state([0.42, 0.42], [0.0, 0.1], [-1, 0]))
+    scene.on_light(light_state(0.5, spot=True, z=0.6, radius=0.08))
+    spot = by_key(markers.marker_array(scene.on_result(result(3))))['light', 0]
+    assert spot.type == markers.CYLINDER
+    assert (spot.pose.position.x, spot.pose.position.z) == (0.5, 0.6)
+    assert math.isclose(spot.scale.x, 0.16) and spot.scale.z == markers.SPOT_DEPTH
+    q = spot.pose.orientation  # turns the cylinder's axis (z) onto y
+    assert math.isclose(q.x, -math.sqrt(0.5)) and math.isclose(q.w, math.sqrt(0.5))
+
+
+def test_exactly_one_deleteall_per_reset() -> None:
+    scene = Scene()
+    arrays = [markers.marker_array(f) for seed in (1, 2, 3)
+              for f in frames(SimConfig(), seed, 6, scene=scene)]
+    assert len(arrays) == 3 * 7
+    deletes = [[m.action for m in a.markers].count(markers.DELETEALL) for a in arrays]
+    assert deletes == ([1] + [0] * 6) * 3
+    assert all(a.markers[0].action == markers.DELETEALL for a in arrays[::7])
+    ids = {tuple((m.ns, m.id) for m in a.markers if m.action != markers.DELETEALL)
+           for a in arrays}
+    assert ids == {tuple(markers.FIXED_IDS) + (('plant', 0),)}  # stable ids every frame
+
+
+def test_target_and_photons_follow_the_episode_from_config_and_seed() -> None:
+    cfg, seed = SimConfig(challenge='control', setting='hard'), 7
+    sim = Simulation(cfg)
+    sim.reset(seed=seed)
+    scene = Scene()
+    got = frames(cfg, seed, scene=scene, oracle=False)
+    assert len(got) == cfg.episode_length + 1 and scene.synced, scene.note
+    target = by_key(markers.marker_array(got[0]))['target', 0]
+    assert target.type == markers.SPHERE
+    assert (target.pose.position.x, target.pose.position.z) == (sim.chamber.target.real,
+                                                                sim.chamber.target.imag)
+    assert math.isclose(target.scale.x, 2 * cfg.width_m(cfg.target_radius))
+    for step, frame in enumerate(got):  # the same photons as an independent simulation
+        if step:
+            sim.step()
+        assert np.array_equal(frame.photons, sim.chamber.photons)
+        found = by_key(markers.marker_array(frame))
+        lit, dark = found['photons', 0], found['photons', 1]
+        assert len(lit.points) + len(dark.points) == sim.chamber.photons.size
+        assert len(lit.points) == int(frame.lit.sum())
+        assert all(p.y == 0.0 for p in dark.points[:5])
+
+
+def test_shape_target_is_its_digit_pixels() -> None:
+    cfg = SimConfig(challenge='shape')
+    frame = frames(cfg, 3, 0)[0]
+    target = by_key(markers.marker_array(frame))['target', 0]
+    assert target.type == markers.CUBE_LIST
+    assert len(target.points) == int(frame.target_mask.sum()) > 0
+    pixel = W / frame.target_mask.shape[0]
+    assert math.isclose(target.scale.x, pixel)
+    rows, cols = np.nonzero(frame.target_mask)
+    assert math.isclose(target.points[0].x, (cols[0] + 0.5) * pixel)
+    assert math.isclose(target.points[0].z, H - (rows[0] + 0.5) * pixel)
+
+
+def test_gantry_or_unfollowed_episodes_show_no_photons_but_the_target() -> None:
+    cfg = SimConfig()
+    msgs = list(episode_messages(cfg, 5, 2))
+    payload = json.loads(msgs[0][1].data)
+    payload['source'] = 'gantry'
+    scene = Scene()
+    scene.on_config(json.dumps(payload))
+    last = [feed(scene, t, m) for t, m in msgs[1:]][-1]
+    assert last.photons is None and last.target is not None
+    # A plant that is not the re-simulated one: photons hidden from then on, target kept.
+    scene = Scene()
+    feed(scene, *msgs[0])
+    scene.on_plant(plant_state([0.1, 0.1], [0.0, 0.2], [-1, 0], stamp_ns=77))
+    frame = scene.on_result(result(0, stamp_ns=77))
+    assert frame.photons is None and frame.target is not None and not scene.synced
+    assert 'differs' in scene.note
+
+
+@pytest.mark.parametrize('make, match', [
+    (lambda: plant_state([0.1, 0.1], [0.0, 0.2], [-1, 5]), r'parent\[1\] = 5'),
+    (lambda: plant_state([0.1, math.nan], [0.0, 0.2], [-1, 0]), r'node_x = nan'),
+    (lambda: plant_state([0.1], [0.0, 0.2], [-1]), r'len\(node_z\) = 2'),
+    (lambda: light_state(math.inf), r'light/state: x = inf'),
+])
+def test_bad_messages_are_refused_naming_field_and_value(make: Any, match: str) -> None:
+    scene = Scene()
+    msg = make()
+    handler = scene.on_light if msg.__msgtype__ == types.LIGHT_COMMAND else scene.on_plant
+    with pytest.raises(ViewInputError, match=match):
+        handler(msg)
+    with pytest.raises(ViewInputError, match='chamber/config: data'):
+        scene.on_config('{not json')
+    with pytest.raises(ViewInputError, match='chamber/config: config'):
+        scene.on_config(json.dumps({'config': {'light_width': -1.0}}))
+
+
+# ----------------------------------------------------------------------------- image
+def test_view_image_size_and_plant_pixels_where_the_plant_is() -> None:
+    frame = stem_frame(step=4)
+    image = ViewRenderer(512).render(frame)
+    assert image.shape == (512, 512, 3) and image.dtype == np.uint8
+    assert ViewRenderer(200).render(frame).shape == (200, 200, 3)
+    px = 512 / W
+    col = round(0.21 * px)
+    green = tuple(reversed(PLANT_COLOURS[0]))  # drawn BGR, published RGB
+    for z in (0.03, 0.1, 0.2, 0.24):  # along the stem
+        assert tuple(image[round((H - z) * px), col]) == green, z
+    for z in (0.3, 0.6):  # above its top
+        assert tuple(image[round((H - z) * px), col]) != green
+    assert not (image[:, round(0.7 * px)] == green).all(axis=1).any()  # far from it
+    # Anti-aliased: the stem's edge has blended pixels, neither plant nor background.
+    row = image[round((H - 0.1) * px)]
+    edge = {tuple(v) for v in row[col - 12:col + 12]} - {green, tuple(row[col - 12])}
+    assert edge
+    assert np.array_equal(ViewRenderer(512).render(frame), image)  # same frame, same bytes
+
+
+def test_view_renderer_refuses_a_bad_size() -> None:
+    with pytest.raises(ValueError, match='view_size must be an int in'):
+        ViewRenderer(8)
+
+
+# ----------------------------------------------------------------------------- over ROS
+NAMESPACE = f'/gs_view_{secrets.token_hex(3)}'
+
+
+def view_node_executable() -> str:
+    from ament_index_python.packages import get_package_prefix
+
+    return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim',
+                        'view_node')
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope='module')
+def chamber() -> Iterator[dict[str, Any]]:
+    """A lockstep sim_node and a view_node with a Foxglove server, in one namespace."""
+    from ros_helpers import Client, NodeProcess
+
+    port = free_port()
+    sim = NodeProcess('-p', 'seed:=3', namespace=NAMESPACE)
+    view = NodeProcess('-p', f'foxglove_port:={port}', namespace=NAMESPACE,
+                       executable=view_node_executable())
+    client = Client(NAMESPACE, name='view_test_client')
+    try:
+        client.connect()
+        yield {'client': client, 'port': port, 'view': view}
+    finally:
+        client.close()
+        outputs = [p.stop() for p in (view, sim)]
+        for code, output in outputs:
+            assert code == 0, output[-3000:]
+
+
+def test_view_node_publishes_markers_and_image_when_subscribed(chamber: dict) -> None:
+    from sensor_msgs.msg import Image
+    from visualization_msgs.msg import MarkerArray
+
+    client = chamber['client']
+    got: dict[str, list] = {'markers': [], 'images': []}
+    client.node.create_subscription(MarkerArray, 'plant/markers', got['markers'].append, 10)
+    client.node.create_subscription(Image, 'camera/image_view', got['images'].append, 10)
+    assert client.spin_until(lambda: client.node.count_publishers(
+        f'{NAMESPACE}/plant/markers') == 1 and client.node.count_subscribers(
+        f'{NAMESPACE}/step_result') >= 2), 'view_node did not appear'
+    client.drain(0.5)
+    reset = client.reset(1, has_seed=True, seed=11)
+    step = client.step(1, 0)
+    assert client.spin_until(lambda: len(got['markers']) >= 2 and len(got['images']) >= 2)
+    stamps = [(m.markers[0].header.stamp.sec, m.markers[0].header.stamp.nanosec)
+              for m in got['markers']]
+    for res in (reset, step):
+        assert (res.header.stamp.sec, res.header.stamp.nanosec) in stamps
+    first = got['markers'][stamps.index((reset.header.stamp.sec, reset.header.stamp.nanosec))]
+    assert first.markers[0].action == markers.DELETEALL  # the reset's frame
+    assert {m.header.frame_id for m in first.markers} == {'chamber'}
+    ns = {(m.ns, m.id) for m in first.markers[1:]}
+    assert ns == set(markers.FIXED_IDS) | {('plant', 0)}
+    target = next(m for m in first.markers if m.ns == 'target')
+    sim = Simulation(SimConfig())
+    sim.reset(seed=11)
+    assert (target.type, target.pose.position.x) == (markers.SPHERE, sim.chamber.target.real)
+    image = got['images'][-1]
+    assert (image.width, image.height, image.encoding, image.step) == (512, 512, 'rgb8', 1536)
+
+
+# ----------------------------------------------------------------------------- Foxglove
+class FoxgloveClient:
+    """A Foxglove WebSocket protocol client (``foxglove.websocket.v1``) on ``websockets``."""
+
+    def __init__(self, port: int) -> None:
+        from websockets.sync.client import connect
+
+        self.ws = connect(f'ws://127.0.0.1:{port}', subprotocols=['foxglove.websocket.v1'],
+                          open_timeout=10)
+        self.channels: dict[str, dict] = {}
+        self.statuses: list[dict] = []
+        self.info = self.wait_json(lambda m: m['op'] == 'serverInfo')
+
+    def _handle(self, raw: Any) -> Any:
+        if isinstance(raw, str):
+            msg = json.loads(raw)
+            if msg['op'] == 'advertise':
+                self.channels.update({c['topic']: c for c in msg['channels']})
+            elif msg['op'] == 'status':
+                self.statuses.append(msg)
+            return msg
+        return raw
+
+    def wait_json(self, match: Any, timeout: float = 10.0) -> dict:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = self._handle(self.ws.recv(timeout=max(0.01, deadline - time.monotonic())))
+            if isinstance(msg, dict) and match(msg):
+                return msg
+        raise AssertionError('no matching JSON message in time')
+
+    def wait_data(self, subscription: int, timeout: float = 10.0) -> tuple[int, bytes]:
+        """(log time ns, payload) of the next MessageData for ``subscription``."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = self._handle(self.ws.recv(timeout=max(0.01, deadline - time.monotonic())))
+            if isinstance(msg, bytes) and msg[0] == 0x01:
+                sub, log_time = struct.unpack_from('<IQ', msg, 1)
+                if sub == subscription:
+                    return log_time, msg[13:]
+        raise AssertionError(f'no message on subscription {subscription} in time')
+
+    def subscribe(self, sub_id: int, topic: str) -> None:
+        if topic not in self.channels:
+            self.wait_json(lambda m: topic in self.channels)
+        self.ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+            {'id': sub_id, 'channelId': self.channels[topic]['id']}]}))
+
+    def advertise(self, channel_id: int, topic: str, schema_name: str) -> None:
+        self.ws.send(json.dumps({'op': 'advertise', 'channels': [
+            {'id': channel_id, 'topic': topic, 'encoding': 'cdr', 'schemaName': schema_name}]}))
+
+    def publish(self, channel_id: int, payload: bytes) -> None:
+        self.ws.send(struct.pack('<BI', 0x01, channel_id) + payload)
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+@pytest.fixture
+def fox(chamber: dict) -> Iterator[FoxgloveClient]:
+    client = FoxgloveClient(chamber['port'])
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def test_foxglove_serves_the_chamber_as_cdr_with_ros2msg_schemas(chamber: dict,
+                                                                 fox: FoxgloveClient) -> None:
+    assert {'clientPublish', 'services'} <= set(fox.info['capabilities'])
+    assert fox.info['supportedEncodings'] == ['cdr']
+    fox.wait_json(lambda m: f'{NAMESPACE}/camera/image_view' in fox.channels, timeout=5)
+    expected = {'chamber/config': STRING, 'camera/image_raw': convert.IMAGE,
+                'plant/state': types.PLANT_STATE, 'light/state': types.LIGHT_COMMAND,
+                'step_result': types.STEP_RESULT, 'plant/markers': markers.MARKER_ARRAY,
+                'camera/image_view': convert.IMAGE}
+    assert set(fox.channels) == {f'{NAMESPACE}/{t}' for t in expected}
+    for topic, typename in expected.items():
+        channel = fox.channels[f'{NAMESPACE}/{topic}']
+        assert (channel['encoding'], channel['schemaName'], channel['schemaEncoding']) == (
+            'cdr', typename, 'ros2msg')
+        assert channel['schema'] == types.msgdef(typename)  # what our MCAP files hold
+    fox.subscribe(1, f'{NAMESPACE}/step_result')
+    time.sleep(0.3)  # the server registers the subscription
+    client = chamber['client']
+    client.reset(20, has_seed=True, seed=4)
+    ros = client.step(1, 1)
+    for _ in range(5):
+        _, payload = fox.wait_data(1)
+        msg = types.deserialize(payload, types.STEP_RESULT)
+        if msg.reset_id == 20 and msg.step_id == 1:
+            break
+    assert (msg.step, msg.reward, list(msg.plant_rewards), msg.info) == (
+        ros.step, ros.reward, list(ros.plant_rewards), ros.info)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (ros.header.stamp.sec,
+                                                                ros.header.stamp.nanosec)
+
+
+def test_foxglove_client_moves_the_light(chamber: dict, fox: FoxgloveClient) -> None:
+    client = chamber['client']
+    client.reset(30, has_seed=True, seed=4)
+    fox.subscribe(2, f'{NAMESPACE}/light/state')
+    topic = f'{NAMESPACE}/light/command'
+    fox.advertise(7, topic, types.LIGHT_COMMAND)
+    time.sleep(0.3)
+    command = types.new(types.LIGHT_COMMAND, step_id=1, mode=convert.MODE_BEAM, x=0.63,
+                        width=0.2)
+    fox.publish(7, types.serialize(command, types.LIGHT_COMMAND))
+    result = client.wait_result(lambda m: m.reset_id == 30 and m.step_id == 1)
+    assert result.info == '' and result.step == 1
+    for _ in range(5):
+        light = types.deserialize(fox.wait_data(2)[1], types.LIGHT_COMMAND)
+        if light.step_id == 1:
+            break
+    assert (light.mode, light.x, light.width) == (convert.MODE_BEAM, 0.63, 0.2)
+    assert not fox.statuses
+
+
+def test_foxglove_client_publishing_elsewhere_is_refused(chamber: dict,
+                                                         fox: FoxgloveClient) -> None:
+    topic = f'{NAMESPACE}/plant/state'
+    fox.advertise(9, topic, types.PLANT_STATE)
+    status = fox.wait_json(lambda m: m['op'] == 'status')
+    assert status['level'] == 2 and f"refused client channel '{topic}'" in status['message']
+    assert f'{NAMESPACE}/light/command' in status['message']
+    fox.publish(9, types.serialize(types.new(types.PLANT_STATE), types.PLANT_STATE))
+    time.sleep(0.3)
+    assert chamber['view'].proc.poll() is None  # still running, nothing forwarded
