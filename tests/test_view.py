@@ -306,14 +306,16 @@ def test_view_node_publishes_markers_and_image_when_subscribed(chamber: dict) ->
 
 
 # ----------------------------------------------------------------------------- Foxglove
+# The protocol of foxglove.websocket.v1 under the name the SDK's server (0.30.3) requires; it
+# refuses the old name at the handshake (HTTP 400 "Missing expected sec-websocket-protocol").
+SUBPROTOCOL = 'foxglove.sdk.v1'
+
+
 class FoxgloveClient:
-    """A Foxglove WebSocket protocol client (``foxglove.websocket.v1``) on ``websockets``."""
+    """A Foxglove WebSocket protocol client on a ``websockets`` connection."""
 
-    def __init__(self, port: int) -> None:
-        from websockets.sync.client import connect
-
-        self.ws = connect(f'ws://127.0.0.1:{port}', subprotocols=['foxglove.websocket.v1'],
-                          open_timeout=10)
+    def __init__(self, ws: Any) -> None:
+        self.ws = ws
         self.channels: dict[str, dict] = {}
         self.statuses: list[dict] = []
         self.info = self.wait_json(lambda m: m['op'] == 'serverInfo')
@@ -360,17 +362,26 @@ class FoxgloveClient:
     def publish(self, channel_id: int, payload: bytes) -> None:
         self.ws.send(struct.pack('<BI', 0x01, channel_id) + payload)
 
-    def close(self) -> None:
-        self.ws.close()
-
 
 @pytest.fixture
 def fox(chamber: dict) -> Iterator[FoxgloveClient]:
-    client = FoxgloveClient(chamber['port'])
-    try:
-        yield client
-    finally:
-        client.close()
+    from websockets.sync.client import connect
+
+    with connect(f'ws://127.0.0.1:{chamber["port"]}', subprotocols=[SUBPROTOCOL],
+                 open_timeout=10) as ws:
+        yield FoxgloveClient(ws)
+
+
+def test_foxglove_handshake_names_the_sdk_subprotocol(chamber: dict) -> None:
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    url = f'ws://127.0.0.1:{chamber["port"]}'
+    with connect(url, subprotocols=[SUBPROTOCOL, 'foxglove.websocket.v1']) as ws:
+        assert ws.subprotocol == SUBPROTOCOL
+    with pytest.raises(InvalidStatus, match='400'):
+        with connect(url, subprotocols=['foxglove.websocket.v1']):
+            pass
 
 
 def test_foxglove_serves_the_chamber_as_cdr_with_ros2msg_schemas(chamber: dict,
