@@ -29,6 +29,8 @@ from growspace_sim.view import markers, Scene, ViewInputError
 from growspace_sim.view.image import PLANT_COLOURS, ViewRenderer
 from growspace_sim.view.sample import episode_messages, feed
 
+RESET_SRV = 'growspace_msgs/srv/Reset'
+
 W = H = 0.84
 TWIG = 0.015 * W  # branch_thickness x chamber width [m]
 
@@ -305,6 +307,31 @@ def test_view_node_publishes_markers_and_image_when_subscribed(chamber: dict) ->
     assert (image.width, image.height, image.encoding, image.step) == (512, 512, 'rgb8', 1536)
 
 
+def test_view_node_survives_bad_input_with_a_warning_naming_it(chamber: dict) -> None:
+    from growspace_msgs.msg import PlantState
+    from std_msgs.msg import String
+
+    client, view = chamber['client'], chamber['view']
+    plant = client.node.create_publisher(PlantState, 'plant/state', 10)
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    config = client.node.create_publisher(String, 'chamber/config', QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # as the chamber's
+    assert client.spin_until(lambda: plant.get_subscription_count() >= 1
+                             and config.get_subscription_count() >= 1)
+    plant.publish(PlantState(node_x=[0.1, 0.2], node_z=[0.0, 0.1], parent=[-1, 7],
+                             plant=[0, 0]))
+    config.publish(String(data='{not json'))
+    assert client.spin_until(lambda: 'parent[1] = 7' in view.output()
+                             and 'chamber/config: data' in view.output(), 10.0), \
+        view.output()[-2000:]
+    client.node.destroy_publisher(plant)
+    client.node.destroy_publisher(config)
+    assert view.proc.poll() is None
+    client.reset(2, has_seed=True, seed=1)  # the chamber's own config brings it back
+    assert view.proc.poll() is None
+
+
 # ----------------------------------------------------------------------------- Foxglove
 # The protocol of foxglove.websocket.v1 under the name the SDK's server (0.30.3) requires; it
 # refuses the old name at the handshake (HTTP 400 "Missing expected sec-websocket-protocol").
@@ -318,6 +345,7 @@ class FoxgloveClient:
         self.ws = ws
         self.channels: dict[str, dict] = {}
         self.statuses: list[dict] = []
+        self.services: dict[str, dict] = {}
         self.info = self.wait_json(lambda m: m['op'] == 'serverInfo')
 
     def _handle(self, raw: Any) -> Any:
@@ -325,6 +353,8 @@ class FoxgloveClient:
             msg = json.loads(raw)
             if msg['op'] == 'advertise':
                 self.channels.update({c['topic']: c for c in msg['channels']})
+            elif msg['op'] == 'advertiseServices':
+                self.services.update({s['name']: s for s in msg['services']})
             elif msg['op'] == 'status':
                 self.statuses.append(msg)
             return msg
@@ -337,6 +367,24 @@ class FoxgloveClient:
             if isinstance(msg, dict) and match(msg):
                 return msg
         raise AssertionError('no matching JSON message in time')
+
+    def call(self, name: str, call_id: int, payload: bytes, timeout: float = 10.0) -> bytes:
+        """Call a service (ServiceCallRequest, opcode 2); the response's payload (opcode 3)."""
+        if name not in self.services:
+            self.wait_json(lambda m: name in self.services)
+        service = self.services[name]['id']
+        self.ws.send(struct.pack('<BIII', 0x02, service, call_id, 3) + b'cdr' + payload)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = self._handle(self.ws.recv(timeout=max(0.01, deadline - time.monotonic())))
+            if isinstance(msg, bytes) and msg[0] == 0x03:
+                got_service, got_call, length = struct.unpack_from('<III', msg, 1)
+                if (got_service, got_call) == (service, call_id):
+                    assert msg[13:13 + length] == b'cdr'
+                    return msg[13 + length:]
+            if isinstance(msg, dict) and msg['op'] == 'serviceCallFailure':
+                raise AssertionError(msg)
+        raise AssertionError(f'no answer from {name} in time')
 
     def wait_data(self, subscription: int, timeout: float = 10.0) -> tuple[int, bytes]:
         """(log time ns, payload) of the next MessageData for ``subscription``."""
@@ -445,3 +493,21 @@ def test_foxglove_client_publishing_elsewhere_is_refused(chamber: dict,
     fox.publish(9, types.serialize(types.new(types.PLANT_STATE), types.PLANT_STATE))
     time.sleep(0.3)
     assert chamber['view'].proc.poll() is None  # still running, nothing forwarded
+
+
+def test_foxglove_reset_service_starts_a_seeded_episode(chamber: dict,
+                                                        fox: FoxgloveClient) -> None:
+    client = chamber['client']
+    name = f'{NAMESPACE}/reset'
+    request = types.new(f'{RESET_SRV}_Request', has_seed=True, seed=9, challenge='control')
+    since = len(client.results)
+    client.drain(0.1)
+    answer = types.deserialize(fox.call(name, 1, types.serialize(
+        request, f'{RESET_SRV}_Request')), f'{RESET_SRV}_Response')
+    assert answer.success and answer.message == '' and answer.reset_id > 0, answer
+    started = client.wait_result(lambda m: m.reset_id == answer.reset_id, since)
+    assert (started.step, started.step_id, started.info) == (0, 0, '')
+    bad = types.new(f'{RESET_SRV}_Request', challenge='juggling')
+    answer = types.deserialize(fox.call(name, 2, types.serialize(
+        bad, f'{RESET_SRV}_Request')), f'{RESET_SRV}_Response')
+    assert not answer.success and 'juggling' in answer.message
