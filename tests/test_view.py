@@ -511,3 +511,31 @@ def test_foxglove_reset_service_starts_a_seeded_episode(chamber: dict,
     answer = types.deserialize(fox.call(name, 2, types.serialize(
         bad, f'{RESET_SRV}_Request')), f'{RESET_SRV}_Response')
     assert not answer.success and 'juggling' in answer.message
+
+
+# ----------------------------------------------------------------------------- README pictures
+def test_readme_pictures_show_what_the_view_sends() -> None:
+    """docs/view_markers.png and docs/view_image.png are what scripts/make_view_screenshot.py
+    draws now, from the MarkerArray and the view image of the same frame."""
+    import cv2
+
+    from growspace_sim.view import marker_png
+    from growspace_sim.view.sample import readme_frame
+
+    docs = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'docs')
+    frame = readme_frame(Scene())
+    array = markers.marker_array(frame)
+    for name, now in (('view_markers.png', marker_png.draw(array, 512)),
+                      ('view_image.png', ViewRenderer(512).render(frame))):
+        path = os.path.join(docs, name)
+        assert os.path.getsize(path) < 100_000, path
+        shipped = cv2.cvtColor(cv2.imread(path), cv2.COLOR_BGR2RGB)
+        assert shipped.shape == now.shape, name
+        assert np.abs(shipped.astype(int) - now).mean() < 0.5, name
+    # The markers picture has the plant's colour where the plant's nodes are.
+    drawn = marker_png.draw(array, 512)
+    green = tuple(round(255 * c) for c in markers.PLANT_COLOURS[0][:3])
+    scale = 512 / (W * 1.1)
+    hits = [tuple(drawn[round((H + 0.15 * W - z) * scale), round((x + 0.05 * W) * scale)])
+            == green for x, z in zip(frame.node_x[1:], frame.node_z[1:])]
+    assert np.mean(hits) > 0.8, hits

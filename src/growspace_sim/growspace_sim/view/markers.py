@@ -49,7 +49,7 @@ TEXT_COLOUR = (1.0, 1.0, 1.0, 1.0)
 WALL_WIDTH = 0.004  # m, line width of the chamber outline
 PHOTON_SIZE = 0.008  # m, side of a photon point
 SPOT_DEPTH = 0.01  # m, thickness of the spotlight disc
-TEXT_HEIGHT = 0.04  # m, height of a capital letter
+TEXT_HEIGHT = 0.025  # m, height of a capital letter
 # The spotlight disc faces the viewer: a cylinder's axis (z) turned onto y, -90 deg about x.
 _Z_TO_Y = (-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
 _IDENTITY = (0.0, 0.0, 0.0, 1.0)

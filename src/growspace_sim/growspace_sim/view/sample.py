@@ -67,3 +67,11 @@ def feed(scene: Any, topic: str, msg: Any) -> Any:
         return scene.on_result(msg)
     return None
 
+
+
+def readme_frame(scene: Any, step: int = 30) -> Any:
+    """The frame the README's pictures show: control easy, seed 0, the oracle, ``step``."""
+    frame = None
+    for topic, msg in episode_messages(SimConfig(), 0, step):
+        frame = feed(scene, topic, msg) or frame
+    return frame
