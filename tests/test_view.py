@@ -332,6 +332,43 @@ def test_view_node_survives_bad_input_with_a_warning_naming_it(chamber: dict) ->
     assert view.proc.poll() is None
 
 
+def test_view_node_shows_a_replayed_bag_with_its_photons() -> None:
+    """``growspace-replay play`` + view_node: the recorded config and seed re-simulate the
+    episode, so photons come with every frame (the first may race the latched config)."""
+    from rclpy.qos import QoSProfile
+    from ros_helpers import Client, NodeProcess
+    from visualization_msgs.msg import MarkerArray
+
+    from growspace_sim.replay.play import play
+
+    bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bags',
+                       'oracle_control_easy.mcap')
+    ns = '/growspace'  # the bag's namespace
+    view = NodeProcess(namespace=ns, executable=view_node_executable())
+    client = Client(ns, name='view_replay_client')
+    got: list = []
+    try:
+        client.node.create_subscription(MarkerArray, 'plant/markers', got.append,
+                                        QoSProfile(depth=100))
+        assert client.spin_until(lambda: client.node.count_publishers(
+            f'{ns}/plant/markers') == 1 and client.node.count_subscribers(
+            f'{ns}/step_result') == 2), 'view_node did not appear'  # it and the client
+        client.drain(0.5)
+        topics = [f'{ns}/{t}' for t in ('chamber/config', 'plant/state', 'light/state',
+                                        'step_result')]
+        assert play(bag, rate=4.0, topics=topics, wait_for_subscribers_s=10.0) == 1 + 3 * 51
+        assert client.spin_until(lambda: len(got) == 51, 10.0), len(got)
+    finally:
+        client.close()
+        code, output = view.stop()
+    assert code == 0, output[-2000:]
+    photons = [{k.id: k.action for k in a.markers if k.ns == 'photons'} for a in got]
+    assert photons[1:] == [{0: markers.ADD, 1: markers.ADD}] * 50, photons
+    assert got[0].markers[0].action == markers.DELETEALL
+    last_plant = next(k for k in got[-1].markers if k.ns == 'plant')
+    assert len(last_plant.points) > 12 * 20  # the oracle's plant has grown
+
+
 # ----------------------------------------------------------------------------- Foxglove
 # The protocol of foxglove.websocket.v1 under the name the SDK's server (0.30.3) requires; it
 # refuses the old name at the handshake (HTTP 400 "Missing expected sec-websocket-protocol").
