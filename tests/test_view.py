@@ -576,3 +576,41 @@ def test_readme_pictures_show_what_the_view_sends() -> None:
     hits = [tuple(drawn[round((H + 0.15 * W - z) * scale), round((x + 0.05 * W) * scale)])
             == green for x, z in zip(frame.node_x[1:], frame.node_z[1:])]
     assert np.mean(hits) > 0.8, hits
+
+
+# ----------------------------------------------------------------------------- export --view
+def test_export_view_adds_markers_and_images_to_a_copy(tmp_path: Any) -> None:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from growspace_sim.replay.bag import Bag
+    from growspace_sim.replay.cli import main as replay_main
+    from growspace_sim.replay.resim import resimulate
+
+    bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bags',
+                       'oracle_shape_easy.mcap')
+    out = tmp_path / 'view.mcap'
+    assert replay_main(['export', bag, str(out), '--view', '--view-size', '256']) == 0
+    assert replay_main(['export', bag, str(out), '--view']) == 2  # never overwritten
+    with Bag(bag) as original, Bag(out) as copy:
+        assert set(copy.topics) == set(original.topics) | {
+            '/growspace/plant/markers', '/growspace/camera/image_view'}
+        assert copy.metadata == original.metadata
+        kept = [(m.topic, m.data, m.log_time) for m in copy.messages(original.topics)]
+        assert kept == [(m.topic, m.data, m.log_time) for m in original.messages()]
+        arrays = [m.decode() for m in copy.messages(['/growspace/plant/markers'])]
+        results = [m.decode() for m in copy.messages(['/growspace/step_result'])]
+        images = [m.decode() for m in copy.messages(['/growspace/camera/image_view'])]
+    assert len(arrays) == len(results) == len(images) == 51
+    assert [a.markers[0].header.stamp for a in arrays] == [r.header.stamp for r in results]
+    assert arrays[0].markers[0].action == markers.DELETEALL
+    assert all({k.ns: k.action for k in a.markers}['photons'] == markers.ADD for a in arrays)
+    assert {k.ns: k.type for k in arrays[0].markers}['target'] == markers.CUBE_LIST  # digit
+    assert (images[0].width, images[0].height, images[0].encoding) == (256, 256, 'rgb8')
+    assert resimulate(out).ok  # the recording itself is untouched
+    # A decoder that is not ours reads the added channels from their ros2msg schemas.
+    with open(out, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        decoded = [msg for _, _, _, msg in reader.iter_decoded_messages(
+            topics=['/growspace/plant/markers'])]
+    assert len(decoded) == 51 and decoded[-1].markers[-1].ns == 'plant'

@@ -79,7 +79,6 @@ class ViewNode:
         self.renderer = ViewRenderer(view_size)
         self.frames = 0  # frames built (for tests and the log)
         self._note = None
-        self._frame_id, self._image_frame_id = markers.FRAME_ID, 'chamber_camera'
         self._publish_markers = transport.publisher(markers.MARKER_ARRAY, MARKERS_TOPIC,
                                                     OBSERVATION_QOS)
         self._publish_image = transport.publisher(convert.IMAGE, IMAGE_TOPIC, OBSERVATION_QOS)
@@ -99,7 +98,7 @@ class ViewNode:
                       transport.resolve('reset'): types.RESET_REQUEST}
             services = {transport.resolve('reset'): (RESET_SRV, self.reset_service)}
             self.fox = foxglove(outputs, inputs, self.on_client_message, services=services)
-        handlers = {'config': self._on_config, 'plant': self.scene.on_plant,
+        handlers = {'config': lambda msg: self.scene.on_config(msg.data), 'plant': self.scene.on_plant,
                     'light': self.scene.on_light, 'result': self._on_result,
                     'image': lambda msg: None}
         for key, topic, typename, qos in INPUTS + (FOXGLOVE_ONLY if self.fox else ()):
@@ -115,12 +114,6 @@ class ViewNode:
             except ViewInputError as e:
                 self.log.warn(f'input:{e.topic}:{e.field}', str(e))
         return receive
-
-    def _on_config(self, msg: Any) -> None:
-        self.scene.on_config(msg.data)
-        payload_frames = _frames_of(msg.data)
-        if payload_frames is not None:
-            self._frame_id, self._image_frame_id = payload_frames
 
     def _on_result(self, msg: Any) -> None:
         with self._reset_done:
@@ -139,10 +132,10 @@ class ViewNode:
         self.frames += 1
         if want_markers:
             self._send(MARKERS_TOPIC, self._publish_markers,
-                       markers.marker_array(frame, self._frame_id))
+                       markers.marker_array(frame, self.scene.frame_id))
         if want_image:
             self._send(IMAGE_TOPIC, self._publish_image, convert.image_msg(
-                self.renderer.render(frame), frame.stamp_ns, self._image_frame_id))
+                self.renderer.render(frame), frame.stamp_ns, self.scene.image_frame_id))
 
     def _wanted(self, topic: str) -> bool:
         if self.transport.has_subscribers(topic):
@@ -189,17 +182,6 @@ class ViewNode:
     def close(self) -> None:
         if self.fox is not None:
             self.fox.close()
-
-
-def _frames_of(text: str) -> tuple[str, str] | None:
-    import json
-
-    try:
-        payload = json.loads(text)
-        return str(payload.get('frame_id') or markers.FRAME_ID), \
-            str(payload.get('image_frame_id') or 'chamber_camera')
-    except (ValueError, AttributeError):
-        return None
 
 
 def read_parameters(node: Any) -> dict[str, Any]:

@@ -102,6 +102,8 @@ class Scene:
     def __init__(self) -> None:
         self.cfg = SimConfig()
         self.source = 'sim'
+        self.frame_id = 'chamber'  # of the chamber's headers, from the config
+        self.image_frame_id = 'chamber_camera'  # of its camera images, from the config
         self.sim: Simulation | None = None
         self.target: complex | None = None  # of the episode, kept when the re-simulation stops
         self.target_mask: np.ndarray | None = None
@@ -136,6 +138,8 @@ class Scene:
                                  or not 0 <= seed <= convert.MAX_SEED):
             raise ViewInputError('chamber/config', 'seed', seed, 'null or an int >= 0')
         self.cfg, self.source = cfg, str(payload.get('source', 'sim'))
+        self.frame_id = str(payload.get('frame_id') or self.frame_id)
+        self.image_frame_id = str(payload.get('image_frame_id') or self.image_frame_id)
         self._restart(cfg, seed, str(payload.get('digit_source', 'auto')))
 
     def _restart(self, cfg: SimConfig, seed: int | None, digit_source: str) -> None:
