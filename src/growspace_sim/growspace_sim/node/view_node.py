@@ -6,8 +6,8 @@ alike) and publishes, only while someone subscribes, one frame per ``step_result
 
 | topic | type | QoS |
 |---|---|---|
-| ``plant/markers`` | visualization_msgs/MarkerArray (frame ``chamber``) | reliable, keep_last 10 |
-| ``camera/image_view`` | sensor_msgs/Image (rgb8, ``view_size`` px wide) | reliable, keep_last 10 |
+| ``plant/markers`` | visualization_msgs/MarkerArray, frame ``chamber`` | reliable, keep_last 10 |
+| ``camera/image_view`` | sensor_msgs/Image, rgb8, ``view_size`` px wide | reliable, keep_last 10 |
 
 Drawing happens here, never in the simulator's step. Parameters: ``view_size`` (px, default
 512), ``foxglove_port`` (0 = no Foxglove server, the default), ``foxglove_address`` (default
@@ -98,8 +98,9 @@ class ViewNode:
                       transport.resolve('reset'): types.RESET_REQUEST}
             services = {transport.resolve('reset'): (RESET_SRV, self.reset_service)}
             self.fox = foxglove(outputs, inputs, self.on_client_message, services=services)
-        handlers = {'config': lambda msg: self.scene.on_config(msg.data), 'plant': self.scene.on_plant,
-                    'light': self.scene.on_light, 'result': self._on_result,
+        handlers = {'config': lambda msg: self.scene.on_config(msg.data),
+                    'plant': self.scene.on_plant, 'light': self.scene.on_light,
+                    'result': self._on_result,
                     'image': lambda msg: None}
         for key, topic, typename, qos in INPUTS + (FOXGLOVE_ONLY if self.fox else ()):
             transport.subscribe(typename, topic, qos,
@@ -206,6 +207,16 @@ def read_parameters(node: Any) -> dict[str, Any]:
     return values
 
 
+def foxglove_factory(values: dict[str, Any]) -> Callable[..., Any]:
+    """What builds ``view.foxglove_server.FoxgloveServer`` on the parameters' address, port."""
+    from growspace_sim.view.foxglove_server import FoxgloveServer
+
+    def build(*args: Any, **kwargs: Any) -> FoxgloveServer:
+        return FoxgloveServer(*args, host=values['foxglove_address'],
+                              port=values['foxglove_port'], **kwargs)
+    return build
+
+
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the view node until SIGINT/SIGTERM (or ``stop``)."""
     from growspace_sim.node.rclpy_transport import RclpyTransport
@@ -215,14 +226,8 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         transport = RclpyTransport(NODE_NAME, args=['view_node', *argv])
         try:
             values = read_parameters(transport.node)
-            foxglove = None
-            if values['foxglove_port']:
-                from growspace_sim.view.foxglove_server import FoxgloveServer
-
-                def foxglove(*args: Any, **kwargs: Any) -> FoxgloveServer:
-                    return FoxgloveServer(*args, host=values['foxglove_address'],
-                                          port=values['foxglove_port'], **kwargs)
-            view = ViewNode(transport, values['view_size'], foxglove)
+            view = ViewNode(transport, values['view_size'],
+                            foxglove_factory(values) if values['foxglove_port'] else None)
         except (ValueError, RuntimeError) as e:
             print(f'view_node: invalid parameter: {e}', file=sys.stderr)
             return EXIT_BAD_PARAM

@@ -99,4 +99,3 @@ def export_with_view(path: str | os.PathLike, out: str | os.PathLike, *,
                     recorder.write(image_channel, types.serialize(image, convert.IMAGE), *times)
                     frames += 1
     return frames
-

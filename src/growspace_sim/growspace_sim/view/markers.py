@@ -175,9 +175,9 @@ def _target(header: Any, frame: Frame) -> Any:
     if frame.target is None:
         return delete(header, 'target', 0)
     d = 2.0 * cfg.width_m(cfg.target_radius)
-    return marker(header, 'target', 0, SPHERE, position=(frame.target.real, 0.0,
-                                                          frame.target.imag),
-                  scale=(d, d, d), rgba=TARGET_COLOUR)
+    position = (frame.target.real, 0.0, frame.target.imag)
+    return marker(header, 'target', 0, SPHERE, position=position, scale=(d, d, d),
+                  rgba=TARGET_COLOUR)
 
 
 def _photons(header: Any, frame: Frame) -> list[Any]:

@@ -68,7 +68,6 @@ def feed(scene: Any, topic: str, msg: Any) -> Any:
     return None
 
 
-
 def readme_frame(scene: Any, step: int = 30) -> Any:
     """The frame the README's pictures show: control easy, seed 0, the oracle, ``step``."""
     frame = None
