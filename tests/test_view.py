@@ -294,3 +294,31 @@ def test_export_view_adds_markers_and_images_to_a_copy(tmp_path: Any) -> None:
         decoded = [msg for _, _, _, msg in reader.iter_decoded_messages(
             topics=['/growspace/plant/markers'])]
     assert len(decoded) == 51 and decoded[-1].markers[-1].ns == 'plant'
+
+
+# ----------------------------------------------------------------------------- ViewNode in process
+def test_view_node_draws_only_what_someone_reads() -> None:
+    from growspace_sim.node.fake import FakeTransport
+    from growspace_sim.node.view_node import IMAGE_TOPIC, MARKERS_TOPIC, ViewNode
+
+    transport = FakeTransport('growspace_view', '/growspace')
+    view = ViewNode(transport, view_size=128)
+    transport.unread = {transport.resolve(MARKERS_TOPIC), transport.resolve(IMAGE_TOPIC)}
+    messages = list(episode_messages(SimConfig(), 2, 6))
+    for topic, msg in messages[:4]:  # config and the reset's tick: nobody reads
+        transport.inject(topic, msg)
+    assert view.frames == 0 and not transport.published
+    transport.unread.discard(transport.resolve(MARKERS_TOPIC))  # RViz subscribes
+    for topic, msg in messages[4:]:
+        transport.inject(topic, msg)
+    arrays = transport.messages(MARKERS_TOPIC)
+    assert view.frames == len(arrays) == 6 and not transport.messages(IMAGE_TOPIC)
+    assert all({k.ns: k.action for k in a.markers}['photons'] == markers.ADD for a in arrays)
+    transport.unread.clear()
+    transport.inject('plant/state', plant_state([0.1, 0.1], [0.0, 0.2], [-1, 3]))
+    assert transport.warnings == [
+        'plant/state: parent[1] = 3, expected -1 or an index below 1; message ignored.']
+    transport.inject(*messages[-1])  # a step_result: drawn with the last good plant
+    image = transport.messages(IMAGE_TOPIC)[-1]
+    assert (image.width, image.height, image.header.frame_id) == (128, 128, 'chamber_camera')
+    assert transport.qos[transport.resolve(MARKERS_TOPIC)].reliability == 'reliable'
