@@ -159,6 +159,23 @@ def test_view_node_shows_a_replayed_bag_with_its_photons() -> None:
     assert len(last_plant.points) > 12 * 20  # the oracle's plant has grown
 
 
+@pytest.mark.parametrize('args, expected', [
+    (('-p', 'view_size:=8'), 'view_size = 8 must be in [16, 4096] px'),
+    (('-p', 'foxglove_port:=70000'), 'foxglove_port = 70000 must be in [0, 65535]'),
+    (('-p', 'foxglove_port:=8765', '-p', 'foxglove_address:=not an address'),
+     "cannot start the Foxglove server on not an address:8765"),
+])
+def test_view_node_bad_parameters_exit_2_naming_them(args: tuple, expected: str) -> None:
+    from ros_helpers import NodeProcess, TIMEOUT_S
+
+    view = NodeProcess(*args, namespace=f'{NAMESPACE}_bad', executable=view_node_executable())
+    try:
+        view.proc.wait(timeout=TIMEOUT_S)
+    finally:
+        code, output = view.stop()
+    assert code == 2 and expected in output, output[-2000:]
+
+
 # ----------------------------------------------------------------------------- Foxglove
 # The protocol of foxglove.websocket.v1 under the name the SDK's server (0.30.3) requires; it
 # refuses the old name at the handshake (HTTP 400 "Missing expected sec-websocket-protocol").

@@ -8,6 +8,9 @@ and a test build the same frames:
   config and seed and kept in step (see ``Scene``).
 - ``markers``: a ``visualization_msgs/MarkerArray`` of a frame (frame ``chamber``, metres).
 - ``image``: an anti-aliased RGB view image of a frame with a text overlay.
+- ``marker_png``: a MarkerArray drawn from the front, as RViz shows it (README picture).
+- ``sample``: the messages of a seeded episode, built in process (benchmark, tests).
+- ``foxglove_server``: the Foxglove WebSocket server (needs ``foxglove-sdk``; not imported here).
 """
 
 from growspace_sim.view.scene import Frame, Scene, ViewInputError
