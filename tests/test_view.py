@@ -107,6 +107,15 @@ def test_markers_of_a_known_stem_in_metres() -> None:
         (m.ns, m.id, len(m.points)) for m in ms]
 
 
+def test_a_bare_root_is_deleted_not_sent_as_an_empty_triangle_list() -> None:
+    scene = Scene()
+    scene.on_plant(plant_state([0.2, 0.6, 0.6], [0.0, 0.0, 0.1], [-1, -1, 1], plant=[0, 1, 1]))
+    found = by_key(markers.marker_array(scene.on_result(result(2))))
+    assert found['plant', 0].action == markers.DELETE  # RViz flags a list without points
+    assert found['plant', 1].action == markers.ADD and len(found['plant', 1].points) == 12
+    assert (found['plant', 1].scale.x, found['plant', 1].scale.y) == (1.0, 1.0)  # RViz scales
+
+
 def test_spotlight_is_a_disc_facing_the_viewer() -> None:
     scene = Scene()
     scene.on_plant(plant_state([0.42, 0.42], [0.0, 0.1], [-1, 0]))

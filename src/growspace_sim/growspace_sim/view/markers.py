@@ -17,6 +17,8 @@ frame of an episode (step 0) starts with one DELETEALL.
 | ``target`` | 0 | SPHERE / CUBE_LIST | target disc, or the digit's pixels (shape) |
 | ``photons`` | 0, 1 | POINTS | lit photons, dark photons |
 | ``status`` | 0 | TEXT_VIEW_FACING | challenge, step, reward above the chamber |
+
+RViz draws triangle lists double-sided (no back-face culling), so the ribbons show from any side.
 """
 
 from __future__ import annotations
@@ -235,7 +237,11 @@ def _plants(header: Any, frame: Frame) -> list[Any]:
     out = []
     for p in np.unique(frame.plant).tolist():
         rows = np.repeat(owner == p, 12)
-        out.append(marker(header, 'plant', p, TRIANGLE_LIST,
+        if not rows.any():  # a bare root: RViz flags a TRIANGLE_LIST without points
+            out.append(delete(header, 'plant', p))
+            continue
+        # Scale 1: RViz scales a TRIANGLE_LIST's vertices by it (and warns about a 0).
+        out.append(marker(header, 'plant', p, TRIANGLE_LIST, scale=(1.0, 1.0, 1.0),
                           rgba=PLANT_COLOURS[p % len(PLANT_COLOURS)],
                           pts=points(vertices[rows])))
     return out
