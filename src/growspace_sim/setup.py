@@ -15,6 +15,7 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.xml')),
         (f'share/{PACKAGE}/launch', glob('launch/*.launch.py')),
+        (f'share/{PACKAGE}/config/foxglove', glob('config/foxglove/*.json')),
     ],
     # Runtime libraries come from rosdep (package.xml) or requirements.txt; listing them here
     # would make the generated console scripts refuse to start beside apt-installed numpy/cv2.
@@ -37,6 +38,7 @@ setup(
             'growspace-replay = growspace_sim.replay:main',
             'sim_node = growspace_sim.node.main:main',
             'teleop = growspace_sim.teleop:main',
+            'view_node = growspace_sim.node.view_node:main',
         ],
     },
 )

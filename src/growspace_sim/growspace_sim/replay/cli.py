@@ -29,9 +29,14 @@ def main(argv: list[str] | None = None) -> int:
     p_check.add_argument('bag')
     p_check.add_argument('--namespace')
     p_check.add_argument('--digit-source', help="override the recorded one ('auto', 'idx', ...)")
-    p_export = sub.add_parser('export', help='one episode to GIF or MP4')
+    p_export = sub.add_parser('export', help='one episode to GIF or MP4; with --view, a copy '
+                              'of the recording with the view added')
     p_export.add_argument('bag')
-    p_export.add_argument('out', help='.gif or .mp4')
+    p_export.add_argument('out', help='.gif or .mp4; .mcap with --view')
+    p_export.add_argument('--view', action='store_true',
+                          help='write OUT.mcap: every message, plus plant/markers and '
+                               'camera/image_view after each step_result (as view_node)')
+    p_export.add_argument('--view-size', type=int, default=512, help='view image width [px]')
     p_export.add_argument('--episode', type=int, default=0, help='0-based; -1 = last')
     p_export.add_argument('--fps', type=float, help='default: the recorded rate')
     p_export.add_argument('--scale', type=int, default=4)
@@ -94,6 +99,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f'REPRODUCED: {report.episodes} episode(s), {report.steps} step(s), '
                   f'{report.messages_compared} messages: every image, plant state, applied '
                   f'light and reward is bit-identical.')
+        elif args.command == 'export' and args.view:
+            from growspace_sim.replay.export_view import export_with_view
+
+            n = export_with_view(args.bag, args.out, namespace=args.namespace,
+                                 view_size=args.view_size, overwrite=args.overwrite,
+                                 warn=lambda line: print(f'warning: {line}', file=sys.stderr))
+            print(f'wrote {args.out} with {n} view frames (plant/markers, camera/image_view)')
         elif args.command == 'export':
             n = export_episode(args.bag, args.out, episode=args.episode, fps=args.fps,
                                scale=args.scale, namespace=args.namespace,

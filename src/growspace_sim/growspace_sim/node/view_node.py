@@ -1,0 +1,261 @@
+"""``view_node``: 3D markers and a human-size image of a chamber, beside the node that runs it.
+
+Subscribes, in its namespace, to ``chamber/config``, ``plant/state``, ``light/state`` and
+``step_result`` (so it serves a live ``sim_node``, a ``growspace-replay play`` and the gantry
+alike) and publishes, only while someone subscribes, one frame per ``step_result``:
+
+| topic | type | QoS |
+|---|---|---|
+| ``plant/markers`` | visualization_msgs/MarkerArray, frame ``chamber`` | reliable, keep_last 10 |
+| ``camera/image_view`` | sensor_msgs/Image, rgb8, ``view_size`` px wide | reliable, keep_last 10 |
+
+Drawing happens here, never in the simulator's step. Parameters: ``view_size`` (px, default
+512), ``foxglove_port`` (0 = no Foxglove server, the default), ``foxglove_address`` (default
+127.0.0.1). With a port, ``view.foxglove_server`` serves the chamber's topics and these two over
+the Foxglove WebSocket protocol and forwards client commands on ``light/command`` and ``reset``.
+
+A message the view cannot use is dropped with a throttled warning naming the field and value;
+the node never stops for bad input. Exit codes: 0 after SIGINT/SIGTERM, 2 for a bad parameter.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+from typing import Any, Callable, Sequence
+
+from growspace_sim import convert
+from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.node.transport import Transport
+from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.view import markers
+from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
+from growspace_sim.view.scene import Scene, ViewInputError
+
+EXIT_BAD_PARAM = 2
+NODE_NAME = 'growspace_view'
+MARKERS_TOPIC = 'plant/markers'
+IMAGE_TOPIC = 'camera/image_view'
+RESET_SRV = 'growspace_msgs/srv/Reset'
+RESET_WAIT_S = 5.0  # how long a Foxglove reset call waits for the chamber's answer [s]
+# (key, topic, type, QoS) of what the view reads; the image is forwarded to Foxglove only.
+INPUTS = (
+    ('config', 'chamber/config', STRING, ros_qos.LATCHED),
+    ('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
+    ('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
+    ('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
+)
+FOXGLOVE_ONLY = (('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),)
+PARAMETERS = {  # name: (default, description)
+    'view_size': (DEFAULT_SIZE, 'width of camera/image_view [px], 16..4096'),
+    'foxglove_port': (0, 'TCP port of the Foxglove WebSocket server; 0 = no server'),
+    'foxglove_address': ('127.0.0.1', 'address the Foxglove server binds; another address '
+                         'lets anyone who reaches it watch and drive the light'),
+}
+
+log = logging.getLogger('growspace_sim.view_node')
+
+
+class ViewNode:
+    """The view's logic over a ``Transport``.
+
+    Args:
+        transport: the middleware (``RclpyTransport`` for ``view_node``).
+        view_size: width of the view image [px].
+        foxglove: builds the Foxglove server from (outputs, inputs, on_input, services), or
+            None for no server.
+
+    Raises:
+        ValueError: a view size out of range.
+    """
+
+    def __init__(self, transport: Transport, view_size: int = DEFAULT_SIZE,
+                 foxglove: Callable[..., Any] | None = None) -> None:
+        self.transport = transport
+        self.log = transport.logger
+        self.scene = Scene()
+        self.renderer = ViewRenderer(view_size)
+        self.frames = 0  # frames built (for tests and the log)
+        self._note = None
+        self._publish_markers = transport.publisher(markers.MARKER_ARRAY, MARKERS_TOPIC,
+                                                    OBSERVATION_QOS)
+        self._publish_image = transport.publisher(convert.IMAGE, IMAGE_TOPIC, OBSERVATION_QOS)
+        self._reset_done = threading.Condition()
+        self._resets: dict[int, str] = {}  # reset_id -> info of its step_result
+        self._next_reset_id = 1 << 40  # far from the ids an RL client counts up from 0
+        self.fox = None
+        if foxglove is not None:
+            self._publish_command = transport.publisher(types.LIGHT_COMMAND, 'light/command',
+                                                        COMMAND_QOS)
+            self._publish_reset = transport.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
+            self._publish_lock = threading.Lock()
+            outputs = [(transport.resolve(t), n) for _, t, n, _ in INPUTS + FOXGLOVE_ONLY]
+            outputs += [(transport.resolve(MARKERS_TOPIC), markers.MARKER_ARRAY),
+                        (transport.resolve(IMAGE_TOPIC), convert.IMAGE)]
+            inputs = {transport.resolve('light/command'): types.LIGHT_COMMAND,
+                      transport.resolve('reset'): types.RESET_REQUEST}
+            services = {transport.resolve('reset'): (RESET_SRV, self.reset_service)}
+            self.fox = foxglove(outputs, inputs, self.on_client_message, services=services)
+        handlers = {'config': lambda msg: self.scene.on_config(msg.data),
+                    'plant': self.scene.on_plant, 'light': self.scene.on_light,
+                    'result': self._on_result,
+                    'image': lambda msg: None}
+        for key, topic, typename, qos in INPUTS + (FOXGLOVE_ONLY if self.fox else ()):
+            transport.subscribe(typename, topic, qos,
+                                self._receiver(transport.resolve(topic), handlers[key]))
+
+    def _receiver(self, topic: str, handle: Callable[[Any], Any]) -> Callable[[Any, bytes], None]:
+        def receive(msg: Any, cdr: bytes) -> None:
+            if self.fox is not None and self.fox.wants(topic):
+                self.fox.log(topic, cdr)
+            try:
+                handle(msg)
+            except ViewInputError as e:
+                self.log.warn(f'input:{e.topic}:{e.field}', str(e))
+        return receive
+
+    def _on_result(self, msg: Any) -> None:
+        with self._reset_done:
+            if int(msg.step_id) == 0 and int(msg.reset_id) >= 1 << 40:
+                self._resets[int(msg.reset_id)] = msg.info
+                self._reset_done.notify_all()
+        frame = self.scene.on_result(msg)
+        if self.scene.note != self._note:
+            self._note = self.scene.note
+            if self._note:
+                self.log.info(f'view: no photons shown: {self._note}')
+        want_markers = self._wanted(MARKERS_TOPIC)
+        want_image = self._wanted(IMAGE_TOPIC)
+        if not (want_markers or want_image):
+            return
+        self.frames += 1
+        if want_markers:
+            self._send(MARKERS_TOPIC, self._publish_markers,
+                       markers.marker_array(frame, self.scene.frame_id))
+        if want_image:
+            self._send(IMAGE_TOPIC, self._publish_image, convert.image_msg(
+                self.renderer.render(frame), frame.stamp_ns, self.scene.image_frame_id))
+
+    def _wanted(self, topic: str) -> bool:
+        if self.transport.has_subscribers(topic):
+            return True
+        return self.fox is not None and self.fox.wants(self.transport.resolve(topic))
+
+    def _send(self, topic: str, publish: Callable[[Any], bytes], msg: Any) -> None:
+        cdr = publish(msg)
+        if self.fox is not None:
+            name = self.transport.resolve(topic)
+            if self.fox.wants(name):
+                self.fox.log(name, cdr)
+
+    # --- Foxglove clients (called in the server's threads) -------------------------------
+
+    def on_client_message(self, topic: str, msg: Any) -> None:
+        """Forward a Foxglove client's LightCommand or ResetRequest to the chamber."""
+        publish = (self._publish_command if topic == self.transport.resolve('light/command')
+                   else self._publish_reset)
+        with self._publish_lock:
+            publish(msg)
+
+    def reset_service(self, request: Any) -> Any:
+        """The chamber's Reset service for Foxglove: sent as a ``reset`` request, answered from
+        the chamber's step_result for it (waits at most ``RESET_WAIT_S``)."""
+        with self._reset_done:
+            reset_id = self._next_reset_id
+            self._next_reset_id += 1
+        msg = types.new(types.RESET_REQUEST, reset_id=reset_id, has_seed=request.has_seed,
+                        seed=request.seed, challenge=request.challenge, setting=request.setting)
+        with self._publish_lock:
+            self._publish_reset(msg)
+        with self._reset_done:
+            done = self._reset_done.wait_for(lambda: reset_id in self._resets, RESET_WAIT_S)
+            info = self._resets.pop(reset_id, None)
+        if not done:
+            message = f'no answer from the chamber within {RESET_WAIT_S} s'
+        else:
+            message = info or ''
+        ok = done and not info
+        return types.new(f'{RESET_SRV}_Response', success=ok, message=message,
+                         reset_id=reset_id if ok else 0)
+
+    def close(self) -> None:
+        if self.fox is not None:
+            self.fox.close()
+
+
+def read_parameters(node: Any) -> dict[str, Any]:
+    """Declare the view's parameters on an rclpy node and return their checked values.
+
+    Raises:
+        ValueError: a value of the wrong type or out of range, naming it.
+    """
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    values = {}
+    for name, (default, description) in PARAMETERS.items():
+        value = node.declare_parameter(
+            name, default, ParameterDescriptor(description=description, read_only=True)).value
+        if type(value) is not type(default):
+            raise ValueError(f'{name} = {value!r} must be a {type(default).__name__}.')
+        values[name] = value
+    if not 0 <= values['foxglove_port'] <= 65535:
+        raise ValueError(f'foxglove_port = {values["foxglove_port"]} must be in [0, 65535].')
+    if not 16 <= values['view_size'] <= 4096:
+        raise ValueError(f'view_size = {values["view_size"]} must be in [16, 4096] px.')
+    return values
+
+
+def foxglove_factory(values: dict[str, Any]) -> Callable[..., Any]:
+    """What builds ``view.foxglove_server.FoxgloveServer`` on the parameters' address, port."""
+    from growspace_sim.view.foxglove_server import FoxgloveServer
+
+    def build(*args: Any, **kwargs: Any) -> FoxgloveServer:
+        return FoxgloveServer(*args, host=values['foxglove_address'],
+                              port=values['foxglove_port'], **kwargs)
+    return build
+
+
+def run(argv: Sequence[str], stop: threading.Event) -> int:
+    """Run the view node until SIGINT/SIGTERM (or ``stop``)."""
+    from growspace_sim.node.rclpy_transport import RclpyTransport
+
+    transport = view = None
+    try:
+        transport = RclpyTransport(NODE_NAME, args=['view_node', *argv])
+        try:
+            values = read_parameters(transport.node)
+            view = ViewNode(transport, values['view_size'],
+                            foxglove_factory(values) if values['foxglove_port'] else None)
+        except (ValueError, RuntimeError) as e:
+            print(f'view_node: invalid parameter: {e}', file=sys.stderr)
+            return EXIT_BAD_PARAM
+        where = '' if view.fox is None else \
+            f', Foxglove on ws://{view.fox.host}:{view.fox.port}'
+        transport.logger.info(f'view_node {transport.resolve("~")}: {values["view_size"]} px'
+                              + where)
+        transport.spin(stop.is_set)
+    except Exception as e:  # noqa: BLE001 - the context shut down under us: a signal
+        if not stop.is_set():
+            raise
+        log.debug('stopped during start-up: %s', e)
+    finally:
+        if view is not None:
+            view.close()
+        if transport is not None:
+            transport.close()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``view_node``."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    logging.basicConfig(level=logging.INFO, format='[%(levelname)s] [%(name)s]: %(message)s')
+    return run(sys.argv[1:] if argv is None else list(argv), stop)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
