@@ -4,12 +4,14 @@ The image is RGB with one entity per channel, so nothing hides anything else:
 red = target (disc or digit), green = plant, blue = light. Pixel (0, 0) is the top-left corner
 (as in ``sensor_msgs/Image``): column = x / width * size, row = (height - z) / height * size.
 The plant is drawn incrementally (segments only ever appear or thicken), so a step draws only
-what changed.
+what changed. Finding those segments and interleaving the planes are small numba kernels
+(compiled once, then loaded from numba's on-disk cache); OpenCV draws the lines and discs.
 """
 
 from __future__ import annotations
 
 import cv2
+from numba import njit
 import numpy as np
 
 from growspace_sim.core.chamber import Chamber
@@ -40,6 +42,7 @@ class Renderer:
         self._drawn_light: tuple[float, ...] | None = None
         self._drawn_px = np.zeros(0, np.int32)
         self._px_for_descendants = np.zeros(0, np.int32)
+        self._segments = np.zeros((0, 5), np.int64)  # to draw: start col, row, end col, row, px
 
     def reset(self, chamber: Chamber) -> None:
         """Forget the previous episode and draw the new target."""
@@ -54,6 +57,8 @@ class Renderer:
         self._drawn_nodes = -1  # force a full plant and light draw
         self._drawn_light = None
         self._drawn_px = np.zeros(chamber.pos.size, np.int32)
+        if self._segments.shape[0] != chamber.pos.size:
+            self._segments = np.zeros((chamber.pos.size, 5), np.int64)
         # Pixel thickness for every possible descendant count, so a step only looks it up.
         base = chamber.thickness_for(np.arange(chamber.pos.size + 1))
         self._px_for_descendants = np.maximum(np.rint(base * self._px_per_m), 1).astype(np.int32)
@@ -68,7 +73,7 @@ class Renderer:
         if placement != self._drawn_light:
             self._draw_light(chamber)
             self._drawn_light = placement
-        return cv2.merge((self._target, self._plant, self._light))  # planes in channel order
+        return _compose(self._target, self._plant, self._light)
 
     def features(self, chamber: Chamber) -> np.ndarray:
         """The same scene as binary feature maps (size, size, 3) uint8 in {0, 1}."""
@@ -78,20 +83,13 @@ class Renderer:
         if chamber.target_mask is not None:  # shape: exactly the pixels the reward counts
             self._plant[chamber.occupancy] = INTENSITY[PLANT]
             return
-        roots, n = chamber.cfg.plant_count, chamber.n_nodes  # roots come first, with no segment
-        px = self._px_for_descendants.take(chamber.descendants[roots:])
-        todo = np.flatnonzero(px > self._drawn_px[roots:n])  # new segments and thickened ones
-        self._drawn_px[roots:n] = px
-        if todo.size == 0:
-            return
-        # A step draws a handful of segments: plain Python beats numpy calls on such sizes.
-        thickness = px.take(todo).tolist()
-        todo += roots
-        ends = chamber.pos.take(todo).tolist()
-        starts = chamber.pos.take(chamber.parent.take(todo)).tolist()
-        point = self._fixed_point
-        for start, end, width in zip(starts, ends, thickness):
-            cv2.line(self._plant, point(start), point(end), INTENSITY[PLANT], width, cv2.LINE_8,
+        scale, offset = self._fixed_scale, self._fixed_offset
+        count = _segments_to_draw(chamber.descendants, chamber.cfg.plant_count,
+                                  self._px_for_descendants, self._drawn_px, chamber.pos,
+                                  chamber.parent, scale[0], scale[1], offset[0], offset[1],
+                                  self._segments)
+        for x0, y0, x1, y1, width in self._segments[:count].tolist():
+            cv2.line(self._plant, (x0, y0), (x1, y1), INTENSITY[PLANT], width, cv2.LINE_8,
                      _SHIFT)
 
     def _draw_light(self, chamber: Chamber) -> None:
@@ -112,3 +110,41 @@ class Renderer:
 
     def _fixed(self, metres: float) -> int:
         return int(round(metres * self._px_per_m * (1 << _SHIFT)))
+
+
+@njit(cache=True)
+def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: np.ndarray,
+                      drawn_px: np.ndarray, pos: np.ndarray, parent: np.ndarray,
+                      scale_x: float, scale_y: float, offset_x: float, offset_y: float,
+                      out: np.ndarray) -> int:
+    """List the segments that are new or thicker than drawn (roots come first, with none).
+
+    Returns:
+        How many: rows of ``out`` = OpenCV fixed-point start (col, row), end (col, row) and
+        thickness in px; ``drawn_px`` records the new thicknesses.
+    """
+    count = 0
+    for node in range(roots, descendants.size):
+        px = px_for_descendants[descendants[node]]
+        if px <= drawn_px[node]:
+            continue
+        drawn_px[node] = px
+        start, end = pos[parent[node]], pos[node]
+        out[count, 0] = round(start.real * scale_x + offset_x)  # half to even, as Python's
+        out[count, 1] = round(start.imag * scale_y + offset_y)
+        out[count, 2] = round(end.real * scale_x + offset_x)
+        out[count, 3] = round(end.imag * scale_y + offset_y)
+        out[count, 4] = px
+        count += 1
+    return count
+
+
+@njit(cache=True)
+def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.ndarray:
+    """Three (H, W) planes as one new (H, W, 3) image (``cv2.merge``, without its overhead)."""
+    rows, cols = red.shape
+    image = np.empty((rows, cols, 3), np.uint8)
+    for r in range(rows):
+        for c in range(cols):
+            image[r, c, 0], image[r, c, 1], image[r, c, 2] = red[r, c], green[r, c], blue[r, c]
+    return image
