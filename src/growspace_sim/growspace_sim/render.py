@@ -63,8 +63,8 @@ class Renderer:
         base = chamber.thickness_for(np.arange(chamber.pos.size + 1))
         self._px_for_descendants = np.maximum(np.rint(base * self._px_per_m), 1).astype(np.int32)
 
-    def render(self, chamber: Chamber) -> np.ndarray:
-        """The observation (size, size, 3) uint8 RGB; a new array each call."""
+    def render(self, chamber: Chamber, out: np.ndarray | None = None) -> np.ndarray:
+        """The observation (size, size, 3) uint8 RGB: a new array, or written into ``out``."""
         if chamber.n_nodes != self._drawn_nodes:  # the plant only changes when it grows
             self._draw_plant(chamber)
             self._drawn_nodes = chamber.n_nodes
@@ -73,7 +73,10 @@ class Renderer:
         if placement != self._drawn_light:
             self._draw_light(chamber)
             self._drawn_light = placement
-        return _compose(self._target, self._plant, self._light)
+        if out is None:
+            out = np.empty((self.size, self.size, 3), np.uint8)
+        _compose(self._target, self._plant, self._light, out)
+        return out
 
     def features(self, chamber: Chamber) -> np.ndarray:
         """The same scene as binary feature maps (size, size, 3) uint8 in {0, 1}."""
@@ -140,11 +143,9 @@ def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: n
 
 
 @njit(cache=True)
-def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray) -> np.ndarray:
-    """Three (H, W) planes as one new (H, W, 3) image (``cv2.merge``, without its overhead)."""
+def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray, image: np.ndarray) -> None:
+    """Three (H, W) planes into one (H, W, 3) image (``cv2.merge``, without its overhead)."""
     rows, cols = red.shape
-    image = np.empty((rows, cols, 3), np.uint8)
     for r in range(rows):
         for c in range(cols):
             image[r, c, 0], image[r, c, 1], image[r, c, 2] = red[r, c], green[r, c], blue[r, c]
-    return image
