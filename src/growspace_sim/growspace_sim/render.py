@@ -16,6 +16,7 @@ import numpy as np
 
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.light import Light
 
 TARGET, PLANT, LIGHT = 0, 1, 2  # channel of each entity
 INTENSITY = (255, 255, 128)  # the light is dimmer so the image reads like the paper's
@@ -40,6 +41,7 @@ class Renderer:
         self._fixed_offset = (-0.5 * one, (cfg.chamber_height * self._rows_per_m - 0.5) * one)
         self._drawn_nodes = -1
         self._drawn_light: tuple[float, ...] | None = None
+        self._band = (0, 0)  # the beam's columns [left, right): drawn by _compose, not a plane
         self._drawn_px = np.zeros(0, np.int32)
         self._px_for_descendants = np.zeros(0, np.int32)
         self._segments = np.zeros((0, 5), np.int64)  # to draw: start col, row, end col, row, px
@@ -68,14 +70,14 @@ class Renderer:
         if chamber.n_nodes != self._drawn_nodes:  # the plant only changes when it grows
             self._draw_plant(chamber)
             self._drawn_nodes = chamber.n_nodes
-        light = chamber.light
+        light = chamber.state.light
         placement = (light.x, light.z, light.width, light.radius)
         if placement != self._drawn_light:
-            self._draw_light(chamber)
+            self._draw_light(light)
             self._drawn_light = placement
         if out is None:
             out = np.empty((self.size, self.size, 3), np.uint8)
-        _compose(self._target, self._plant, self._light, out)
+        _compose(self._target, self._plant, self._light, self._band[0], self._band[1], out)
         return out
 
     def features(self, chamber: Chamber) -> np.ndarray:
@@ -95,16 +97,15 @@ class Renderer:
             cv2.line(self._plant, (x0, y0), (x1, y1), INTENSITY[PLANT], width, cv2.LINE_8,
                      _SHIFT)
 
-    def _draw_light(self, chamber: Chamber) -> None:
-        light = chamber.light
-        self._light.fill(0)  # 7 kB: cheaper than working out what changed
+    def _draw_light(self, light: Light) -> None:
         if light.spot:
+            self._light.fill(0)  # 7 kB: cheaper than working out what changed
             cv2.circle(self._light, self._fixed_point(complex(light.x, light.z)),
                        self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
-        else:
+        else:  # full-height columns: the plane stays empty
             left = int(round((light.x - 0.5 * light.width) * self._px_per_m))
             right = int(round((light.x + 0.5 * light.width) * self._px_per_m))
-            self._light[:, max(left, 0):right] = INTENSITY[LIGHT]
+            self._band = (max(left, 0), right)
 
     def _fixed_point(self, p: complex) -> tuple[int, int]:
         """OpenCV fixed-point (col, row) of a chamber point (complex, m)."""
@@ -143,9 +144,14 @@ def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: n
 
 
 @njit(cache=True)
-def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray, image: np.ndarray) -> None:
-    """Three (H, W) planes into one (H, W, 3) image (``cv2.merge``, without its overhead)."""
+def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray, band_left: int,
+             band_right: int, image: np.ndarray) -> None:
+    """Three (H, W) planes into one (H, W, 3) image (``cv2.merge``, without its overhead); the
+    columns [band_left, band_right) are lit in blue as well (the beam)."""
     rows, cols = red.shape
+    band = np.zeros(cols, np.uint8)
+    band[band_left:band_right] = INTENSITY[LIGHT]
     for r in range(rows):
         for c in range(cols):
-            image[r, c, 0], image[r, c, 1], image[r, c, 2] = red[r, c], green[r, c], blue[r, c]
+            image[r, c, 0], image[r, c, 1] = red[r, c], green[r, c]
+            image[r, c, 2] = blue[r, c] | band[c]

@@ -219,20 +219,23 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
         """The batched info of the chambers with an outcome (``mask``: only those)."""
         n, plants = self.num_envs, self.cfg.plant_count
         has = np.array([o is not None for o in outcomes]) if mask is None else mask.copy()
+        rows = np.flatnonzero(has).tolist()
+        chambers = [self.sims[i].chamber for i in rows]
+        lights = [c.state.light for c in chambers]
         step = np.zeros(n, np.int64)
         success = np.zeros(n, bool)
         plant_rewards = np.zeros((n, plants))
         branch_counts = np.zeros((n, plants), np.int64)
         light = np.zeros((len(LIGHT_KEYS), n))
         digit = np.zeros(n, np.int64)
-        for i in np.flatnonzero(has).tolist():
-            chamber, outcome = self.sims[i].chamber, outcomes[i]
-            step[i], success[i] = chamber.steps, outcome.success
-            plant_rewards[i] = outcome.plant_rewards
-            branch_counts[i] = chamber.state.branch_counts
-            lamp = chamber.light
-            light[:, i] = lamp.x, lamp.z, lamp.width, lamp.radius
-            digit[i] = self.sims[i].digit or 0
+        if rows:  # one numpy call per field, not one per chamber
+            step[rows] = [c.state.steps for c in chambers]
+            success[rows] = [outcomes[i].success for i in rows]
+            plant_rewards[rows] = [outcomes[i].plant_rewards for i in rows]
+            branch_counts[rows] = [c.state.branch_counts for c in chambers]
+            light[:, rows] = [[lamp.x for lamp in lights], [lamp.z for lamp in lights],
+                              [lamp.width for lamp in lights], [lamp.radius for lamp in lights]]
+            digit[rows] = [self.sims[i].digit or 0 for i in rows]
         info: dict[str, Any] = {
             'step': step, 'success': success, 'plant_rewards': plant_rewards,
             'branch_counts': branch_counts,
