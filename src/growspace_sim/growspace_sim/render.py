@@ -4,8 +4,10 @@ The image is RGB with one entity per channel, so nothing hides anything else:
 red = target (disc or digit), green = plant, blue = light. Pixel (0, 0) is the top-left corner
 (as in ``sensor_msgs/Image``): column = x / width * size, row = (height - z) / height * size.
 The plant is drawn incrementally (segments only ever appear or thicken), so a step draws only
-what changed. Finding those segments and interleaving the planes are small numba kernels
-(compiled once, then loaded from numba's on-disk cache); OpenCV draws the lines and discs.
+what changed: OpenCV draws lines and discs on one plane per entity, and the RGB image is kept up
+to date channel by channel (a beam's move rewrites only the columns it left or entered). Finding
+the segments to draw and copying planes into channels are small numba kernels (compiled once,
+then loaded from numba's on-disk cache).
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ class Renderer:
         self._fixed_offset = (-0.5 * one, (cfg.chamber_height * self._rows_per_m - 0.5) * one)
         self._drawn_nodes = -1
         self._drawn_light: tuple[float, ...] | None = None
-        self._band = (0, 0)  # the beam's columns [left, right): drawn by _compose, not a plane
+        self._image = np.zeros((self.size, self.size, 3), np.uint8)  # the planes, interleaved
+        self._band = (0, 0)  # the beam's columns [left, right) in the image (no plane)
         self._drawn_px = np.zeros(0, np.int32)
         self._px_for_descendants = np.zeros(0, np.int32)
         self._segments = np.zeros((0, 5), np.int64)  # to draw: start col, row, end col, row, px
@@ -56,6 +59,9 @@ class Renderer:
             radius = chamber.cfg.width_m(chamber.cfg.target_radius)
             cv2.circle(self._target, self._fixed_point(chamber.target), self._fixed(radius),
                        INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)
+        self._image.fill(0)
+        _put_channel(self._target, self._image, TARGET)
+        self._band = (0, 0)
         self._drawn_nodes = -1  # force a full plant and light draw
         self._drawn_light = None
         self._drawn_px = np.zeros(chamber.pos.size, np.int32)
@@ -69,6 +75,7 @@ class Renderer:
         """The observation (size, size, 3) uint8 RGB: a new array, or written into ``out``."""
         if chamber.n_nodes != self._drawn_nodes:  # the plant only changes when it grows
             self._draw_plant(chamber)
+            _put_channel(self._plant, self._image, PLANT)
             self._drawn_nodes = chamber.n_nodes
         light = chamber.state.light
         placement = (light.x, light.z, light.width, light.radius)
@@ -76,8 +83,8 @@ class Renderer:
             self._draw_light(light)
             self._drawn_light = placement
         if out is None:
-            out = np.empty((self.size, self.size, 3), np.uint8)
-        _compose(self._target, self._plant, self._light, self._band[0], self._band[1], out)
+            return self._image.copy()
+        out[...] = self._image
         return out
 
     def features(self, chamber: Chamber) -> np.ndarray:
@@ -102,10 +109,14 @@ class Renderer:
             self._light.fill(0)  # 7 kB: cheaper than working out what changed
             cv2.circle(self._light, self._fixed_point(complex(light.x, light.z)),
                        self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
+            _put_channel(self._light, self._image, LIGHT)
         else:  # full-height columns: the plane stays empty
             left = int(round((light.x - 0.5 * light.width) * self._px_per_m))
             right = int(round((light.x + 0.5 * light.width) * self._px_per_m))
-            self._band = (max(left, 0), right)
+            band = (max(left, 0), min(max(right, 0), self.size))  # as slice [left:right] would
+            _move_band(self._image, self._band[0], self._band[1], band[0], band[1],
+                       INTENSITY[LIGHT])
+            self._band = band
 
     def _fixed_point(self, p: complex) -> tuple[int, int]:
         """OpenCV fixed-point (col, row) of a chamber point (complex, m)."""
@@ -144,14 +155,22 @@ def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: n
 
 
 @njit(cache=True)
-def _compose(red: np.ndarray, green: np.ndarray, blue: np.ndarray, band_left: int,
-             band_right: int, image: np.ndarray) -> None:
-    """Three (H, W) planes into one (H, W, 3) image (``cv2.merge``, without its overhead); the
-    columns [band_left, band_right) are lit in blue as well (the beam)."""
-    rows, cols = red.shape
-    band = np.zeros(cols, np.uint8)
-    band[band_left:band_right] = INTENSITY[LIGHT]
+def _put_channel(plane: np.ndarray, image: np.ndarray, channel: int) -> None:
+    """Copy an (H, W) plane into one channel of an (H, W, 3) image."""
+    rows, cols = plane.shape
     for r in range(rows):
         for c in range(cols):
-            image[r, c, 0], image[r, c, 1] = red[r, c], green[r, c]
-            image[r, c, 2] = blue[r, c] | band[c]
+            image[r, c, channel] = plane[r, c]
+
+
+@njit(cache=True)
+def _move_band(image: np.ndarray, old_left: int, old_right: int, left: int, right: int,
+               value: int) -> None:
+    """Move the lit columns of the light channel from [old_left, old_right) to [left, right),
+    rewriting only the columns that change."""
+    rows = image.shape[0]
+    for c in range(min(old_left, left), max(old_right, right)):
+        lit = left <= c < right
+        if lit != (old_left <= c < old_right):
+            for r in range(rows):
+                image[r, c, 2] = value if lit else 0
