@@ -155,20 +155,22 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
         if mode == AutoresetMode.DISABLED and self._ended.any():
             raise RuntimeError(f'chambers {np.flatnonzero(self._ended).tolist()} ended: reset '
                                f"them (options={{'reset_mask': ...}}) before stepping.")
-        rewards = np.zeros(self.num_envs)
-        truncations = np.zeros(self.num_envs, bool)
         outcomes: list[StepOutcome | None] = [None] * self.num_envs
         values = actions if self.continuous else actions.tolist()
-        for i, sim in enumerate(self.sims):
-            if mode == AutoresetMode.NEXT_STEP and self._ended[i]:
+        autoreset = self._ended.tolist() if mode == AutoresetMode.NEXT_STEP \
+            else [False] * self.num_envs
+        for i, sim in enumerate(self.sims):  # Python lists: numpy scalar access costs more
+            if autoreset[i]:
                 outcomes[i] = sim.reset()
-                continue
-            if self.continuous:
+            elif self.continuous:
                 sim.apply_continuous(values[i])
+                outcomes[i] = sim.step()
             else:
                 sim.apply_discrete(values[i])
-            outcomes[i] = outcome = sim.step()
-            rewards[i], truncations[i] = outcome.reward, outcome.truncated
+                outcomes[i] = sim.step()
+        rewards = np.array([0.0 if reset else o.reward for reset, o in zip(autoreset, outcomes)])
+        truncations = np.array([not reset and o.truncated
+                                for reset, o in zip(autoreset, outcomes)])
         final: dict[str, Any] = {}
         if mode == AutoresetMode.SAME_STEP and truncations.any():
             final = self._finish(truncations, outcomes)
