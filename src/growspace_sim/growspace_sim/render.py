@@ -44,7 +44,7 @@ class Renderer:
         self._drawn_nodes = -1
         self._drawn_light: tuple[float, ...] | None = None
         self._image = np.zeros((self.size, self.size, 3), np.uint8)  # the planes, interleaved
-        self._band = (0, 0)  # the beam's columns [left, right) in the image (no plane)
+        self._band = np.zeros(2, np.int64)  # the beam's columns [left, right) in the image
         self._drawn_px = np.zeros(0, np.int32)
         self._px_for_descendants = np.zeros(0, np.int32)
         self._segments = np.zeros((0, 5), np.int64)  # to draw: start col, row, end col, row, px
@@ -61,7 +61,7 @@ class Renderer:
                        INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)
         self._image.fill(0)
         _put_channel(self._target, self._image, TARGET)
-        self._band = (0, 0)
+        self._band[:] = 0
         self._drawn_nodes = -1  # force a full plant and light draw
         self._drawn_light = None
         self._drawn_px = np.zeros(chamber.pos.size, np.int32)
@@ -111,12 +111,7 @@ class Renderer:
                        self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
             _put_channel(self._light, self._image, LIGHT)
         else:  # full-height columns: the plane stays empty
-            left = int(round((light.x - 0.5 * light.width) * self._px_per_m))
-            right = int(round((light.x + 0.5 * light.width) * self._px_per_m))
-            band = (max(left, 0), min(max(right, 0), self.size))  # as slice [left:right] would
-            _move_band(self._image, self._band[0], self._band[1], band[0], band[1],
-                       INTENSITY[LIGHT])
-            self._band = band
+            _move_band(self._image, self._band, light.x, light.width, self._px_per_m)
 
     def _fixed_point(self, p: complex) -> tuple[int, int]:
         """OpenCV fixed-point (col, row) of a chamber point (complex, m)."""
@@ -164,13 +159,16 @@ def _put_channel(plane: np.ndarray, image: np.ndarray, channel: int) -> None:
 
 
 @njit(cache=True)
-def _move_band(image: np.ndarray, old_left: int, old_right: int, left: int, right: int,
-               value: int) -> None:
-    """Move the lit columns of the light channel from [old_left, old_right) to [left, right),
-    rewriting only the columns that change."""
-    rows = image.shape[0]
-    for c in range(min(old_left, left), max(old_right, right)):
+def _move_band(image: np.ndarray, band: np.ndarray, x: float, width: float,
+               px_per_m: float) -> None:
+    """Light the beam's columns (centre x, width in m) in the blue channel, rewriting only the
+    columns that change from ``band`` (the lit [left, right) so far, updated)."""
+    cols = image.shape[1]
+    left = max(round((x - 0.5 * width) * px_per_m), 0)  # half to even, as Python's round
+    right = min(max(round((x + 0.5 * width) * px_per_m), 0), cols)
+    for c in range(min(band[0], left), max(band[1], right)):
         lit = left <= c < right
-        if lit != (old_left <= c < old_right):
-            for r in range(rows):
-                image[r, c, 2] = value if lit else 0
+        if lit != (band[0] <= c < band[1]):
+            for r in range(image.shape[0]):
+                image[r, c, LIGHT] = INTENSITY[LIGHT] if lit else 0
+    band[0], band[1] = left, right

@@ -91,12 +91,16 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._ended = np.zeros(self.num_envs, bool)  # episode over: autoreset pending
+        self._digits = self.cfg.task.digits is not None  # shape targets: info names the digit
+        self._zeros = np.zeros(self.cfg.plant_count)  # the info of a chamber without news
+        self._zero_counts = np.zeros(self.cfg.plant_count, np.int64)
+        self._chambers = tuple(sim.chamber for sim in self.sims)
         self._started = False
 
     @property
     def chambers(self) -> tuple[Chamber, ...]:
         """The simulated chambers (privileged state, for oracles and tests)."""
-        return tuple(sim.chamber for sim in self.sims)
+        return self._chambers
 
     def set_target_digits(self, digits: Sequence[int]) -> None:
         """Draw shape targets from these digits from each chamber's next reset on."""
@@ -218,32 +222,25 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
 
     def _info(self, outcomes: list[StepOutcome | None],
               mask: np.ndarray | None = None) -> dict[str, Any]:
-        """The batched info of the chambers with an outcome (``mask``: only those)."""
-        n, plants = self.num_envs, self.cfg.plant_count
-        has = np.array([o is not None for o in outcomes]) if mask is None else mask.copy()
-        rows = np.flatnonzero(has).tolist()
-        chambers = [self.sims[i].chamber for i in rows]
-        lights = [c.state.light for c in chambers]
-        step = np.zeros(n, np.int64)
-        success = np.zeros(n, bool)
-        plant_rewards = np.zeros((n, plants))
-        branch_counts = np.zeros((n, plants), np.int64)
-        light = np.zeros((len(LIGHT_KEYS), n))
-        digit = np.zeros(n, np.int64)
-        if rows:  # one numpy call per field, not one per chamber
-            step[rows] = [c.state.steps for c in chambers]
-            success[rows] = [outcomes[i].success for i in rows]
-            plant_rewards[rows] = [outcomes[i].plant_rewards for i in rows]
-            branch_counts[rows] = [c.state.branch_counts for c in chambers]
-            light[:, rows] = [[lamp.x for lamp in lights], [lamp.z for lamp in lights],
-                              [lamp.width for lamp in lights], [lamp.radius for lamp in lights]]
-            digit[rows] = [self.sims[i].digit or 0 for i in rows]
+        """The batched info of the chambers with an outcome (``mask``: only those); a chamber
+        without one reads zeros, as in Gymnasium's vector infos."""
+        has = [o is not None for o in outcomes] if mask is None else mask.tolist()
+        blank = (0, False, self._zeros, self._zero_counts, (0.0,) * len(LIGHT_KEYS), 0)
+        rows = [(c.state.steps, o.success, o.plant_rewards, c.state.branch_counts,
+                 (c.state.light.x, c.state.light.z, c.state.light.width, c.state.light.radius),
+                 sim.digit or 0) if h else blank
+                for sim, c, o, h in zip(self.sims, self.chambers, outcomes, has)]
+        step, success, plant_rewards, branch_counts, light, digit = zip(*rows)
+        light = np.array(light).T
+        has = np.array(has)
+        has.flags.writeable = False  # one mask shared by every key
         info: dict[str, Any] = {
-            'step': step, 'success': success, 'plant_rewards': plant_rewards,
-            'branch_counts': branch_counts,
+            'step': np.array(step, np.int64), 'success': np.array(success),
+            'plant_rewards': np.array(plant_rewards),
+            'branch_counts': np.array(branch_counts, np.int64),
             'light': {key: light[k] for k, key in enumerate(LIGHT_KEYS)}}
-        if self.cfg.task.digits is not None:
-            info['digit'] = digit
+        if self._digits:
+            info['digit'] = np.array(digit, np.int64)
         for key in LIGHT_KEYS:
             info['light'][f'_{key}'] = has
         for key in list(info):
