@@ -123,6 +123,7 @@ class Chamber:
             target=layout.target, nearest=np.full(n, np.inf), target_mask=target_mask,
             occupancy=np.zeros((self._res, self._res), bool),
             light=lights.initial_light(cfg, layout.light_x, layout.light_z), steps=0, rng=rng)
+        self._bind(state)
         self._append(state, roots + 1j * cfg.width_m(cfg.first_branch_height), np.arange(n))
         return state
 
@@ -196,20 +197,18 @@ class Chamber:
         return self._outcome(grown)
 
     def _grow(self, s: ChamberState) -> int:
-        cfg, light = self.cfg, s.light
+        light = s.light
         half_span = light.radius if light.spot else 0.5 * light.width
-        count = kernels.attract(
-            s.photons, s.photon_x, s.nearest_node, s.nearest_distance, s.available, s.pos,
-            s.n_nodes, light.x - half_span, light.x + half_span, light.spot,
-            complex(light.x, light.z), light.radius, self._pull, self._strength, self._buds)
-        if count == 0:
-            return 0
-        buds = self._buds[:count]
-        if count > cfg.max_branching:
-            buds = np.sort(s.rng.choice(buds, cfg.max_branching, replace=False))
-        # a segment that would pierce a wall, floor or ceiling is not grown
-        grown = kernels.sprout(buds, self._pull, self._strength, s.pos, self._branch_length,
-                               cfg.chamber_width, cfg.chamber_height, self._new)
+        count, grown = kernels.grow(
+            s.photons, s.photon_x, s.nearest_node, s.nearest_distance, s.available, s.n_nodes,
+            light.x - half_span, light.x + half_span, light.spot, complex(light.x, light.z),
+            light.radius, *self._grow_args)
+        if grown < 0:  # more buds than may grow: a seeded draw picks them
+            buds = np.sort(s.rng.choice(self._buds[:count], self.cfg.max_branching,
+                                        replace=False))
+            grown = kernels.sprout(buds, *self._sprout_args)
+        else:
+            buds = self._buds
         if grown:
             self._append(s, self._new[:grown], buds[:grown])
         return grown
@@ -218,21 +217,29 @@ class Chamber:
         """Add nodes with segments to their parents and update what depends on them."""
         start = s.n_nodes
         s.n_nodes = start + new.size
-        target = s.target is not None
-        left = kernels.append(
-            new, parents, start, s.pos, s.parent, s.plant, s.has_child, s.depth, s.ancestors,
-            s.descendants, self._deep, s.branch_counts, target, s.target if target else 0j,
-            s.nearest, s.target_mask is not None, s.occupancy, self._pixel_steps,
-            self._res / self.cfg.chamber_width, self._res / self.cfg.chamber_height,
-            self.cfg.chamber_height, s.canopy, self._column_steps, self._half_thickness,
-            1.0 / self._column_width, s.photons, s.photon_x, s.photon_column, s.nearest_node,
-            s.nearest_distance, s.available, self._kill, self._influence, self.cfg.shading)
+        left = kernels.append(new, parents, start, s.photons, s.photon_x, s.photon_column,
+                              s.nearest_node, s.nearest_distance, s.available,
+                              *self._append_args)
         if left < s.photons.size:  # the survivors are the first ones: keep those
             s.photons, s.photon_x, s.photon_column = \
                 s.photons[:left], s.photon_x[:left], s.photon_column[:left]
             s.nearest_node, s.nearest_distance, s.available = \
                 s.nearest_node[:left], s.nearest_distance[:left], s.available[:left]
         self._outcome_cache = self._tips_cache = None
+
+    def _bind(self, s: ChamberState) -> None:
+        """Gather the kernels' arguments that stay the same for the whole episode."""
+        cfg, target = self.cfg, s.target is not None
+        self._sprout_args = (self._pull, self._strength, s.pos, self._branch_length,
+                             cfg.chamber_width, cfg.chamber_height, self._new)
+        self._grow_args = (cfg.max_branching, self._buds) + self._sprout_args
+        self._append_args = (
+            s.pos, s.parent, s.plant, s.has_child, s.depth, s.ancestors, s.descendants,
+            self._deep, s.branch_counts, target, s.target if target else 0j, s.nearest,
+            s.target_mask is not None, s.occupancy, self._pixel_steps,
+            self._res / cfg.chamber_width, self._res / cfg.chamber_height, cfg.chamber_height,
+            s.canopy, self._column_steps, self._half_thickness, 1.0 / self._column_width,
+            self._kill, self._influence, cfg.shading)
 
     def _column_of(self, x: np.ndarray) -> np.ndarray:
         column = (x * (1.0 / self._column_width)).astype(np.intp)

@@ -61,17 +61,20 @@ def _bisect(x: np.ndarray, value: float, right: bool) -> int:
 
 
 @njit(cache=True, error_model='numpy')
-def attract(photons: np.ndarray, photon_x: np.ndarray, nearest_node: np.ndarray,
-            nearest_distance: np.ndarray, available: np.ndarray, pos: np.ndarray, n_nodes: int,
-            low: float, high: float, spot: bool, centre: complex, radius: float,
-            pull: np.ndarray, strength: np.ndarray, buds: np.ndarray) -> int:
-    """Sum, per node, the unit vectors towards the lit photons that attract it.
+def grow(photons: np.ndarray, photon_x: np.ndarray, nearest_node: np.ndarray,
+         nearest_distance: np.ndarray, available: np.ndarray, n_nodes: int, low: float,
+         high: float, spot: bool, centre: complex, radius: float, max_branching: int,
+         buds: np.ndarray, pull: np.ndarray, strength: np.ndarray, pos: np.ndarray,
+         branch_length: float, width: float, height: float, new: np.ndarray) -> tuple[int, int]:
+    """Find the buds the lit photons attract and, if at most ``max_branching``, sprout them.
 
     Lit: x in [low, high] (and within ``radius`` of ``centre`` for a spotlight) and available.
+    Each lit photon pulls its nearest node along the unit vector towards it.
 
     Returns:
-        The number of buds (nodes whose pull has a direction), listed in ascending order in
-        ``buds``; ``pull`` and ``strength`` hold their sums and their lengths.
+        (buds, grown): the number of buds (nodes whose pull has a direction, listed in
+        ascending order in ``buds``; ``pull`` and ``strength`` hold their sums and lengths),
+        and the new tips ``sprout`` kept, or -1 when there are more buds than may grow.
     """
     pull[:n_nodes] = 0.0
     start, end = _bisect(photon_x, low, False), _bisect(photon_x, high, True)
@@ -90,7 +93,9 @@ def attract(photons: np.ndarray, photon_x: np.ndarray, nearest_node: np.ndarray,
         if strength[node] > _DIRECTION_EPS:
             buds[count] = node
             count += 1
-    return count
+    if count > max_branching:
+        return count, -1
+    return count, sprout(buds[:count], pull, strength, pos, branch_length, width, height, new)
 
 
 @njit(cache=True, error_model='numpy')
@@ -222,15 +227,16 @@ def update_photons(photons: np.ndarray, photon_x: np.ndarray, column: np.ndarray
 
 
 @njit(cache=True)
-def append(new: np.ndarray, parents: np.ndarray, start: int, pos: np.ndarray,
+def append(new: np.ndarray, parents: np.ndarray, start: int, photons: np.ndarray,
+           photon_x: np.ndarray, column: np.ndarray, nearest_node: np.ndarray,
+           nearest_distance: np.ndarray, available: np.ndarray, pos: np.ndarray,
            parent: np.ndarray, plant: np.ndarray, has_child: np.ndarray, depth: np.ndarray,
            ancestors: np.ndarray, descendants: np.ndarray, deep: bool,
            branch_counts: np.ndarray, has_target: bool, target: complex, nearest: np.ndarray,
            has_mask: bool, occupancy: np.ndarray, pixel_t: np.ndarray, col_per_m: float,
            row_per_m: float, height: float, canopy: np.ndarray, column_t: np.ndarray,
-           half: float, inv_column: float, photons: np.ndarray, photon_x: np.ndarray,
-           column: np.ndarray, nearest_node: np.ndarray, nearest_distance: np.ndarray,
-           available: np.ndarray, kill: float, influence: float, shading: bool) -> int:
+           half: float, inv_column: float, kill: float, influence: float,
+           shading: bool) -> int:
     """Add nodes ``new`` (numbered from ``start``) with segments to ``parents`` and update what
     depends on them: descendants, the nearest approach to a point target, the plant's pixels
     for a shape target, the photons' nearest nodes, used-up photons, the canopy and which
