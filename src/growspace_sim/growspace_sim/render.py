@@ -48,6 +48,7 @@ class Renderer:
         self._drawn_px = np.zeros(0, np.int32)
         self._px_for_descendants = np.zeros(0, np.int32)
         self._segments = np.zeros((0, 5), np.int64)  # to draw: start col, row, end col, row, px
+        self._box = np.zeros(4, np.int64)  # rows [0, 1) and columns [2, 3) they can reach
 
     def reset(self, chamber: Chamber) -> None:
         """Forget the previous episode and draw the new target."""
@@ -60,7 +61,7 @@ class Renderer:
             cv2.circle(self._target, self._fixed_point(chamber.target), self._fixed(radius),
                        INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)
         self._image.fill(0)
-        _put_channel(self._target, self._image, TARGET)
+        _put_channel(self._target, self._image, TARGET, 0, self.size, 0, self.size)
         self._band[:] = 0
         self._drawn_nodes = -1  # force a full plant and light draw
         self._drawn_light = None
@@ -75,7 +76,6 @@ class Renderer:
         """The observation (size, size, 3) uint8 RGB: a new array, or written into ``out``."""
         if chamber.n_nodes != self._drawn_nodes:  # the plant only changes when it grows
             self._draw_plant(chamber)
-            _put_channel(self._plant, self._image, PLANT)
             self._drawn_nodes = chamber.n_nodes
         light = chamber.state.light
         placement = (light.x, light.z, light.width, light.radius)
@@ -94,22 +94,25 @@ class Renderer:
     def _draw_plant(self, chamber: Chamber) -> None:
         if chamber.target_mask is not None:  # shape: exactly the pixels the reward counts
             self._plant[chamber.occupancy] = INTENSITY[PLANT]
+            _put_channel(self._plant, self._image, PLANT, 0, self.size, 0, self.size)
             return
-        scale, offset = self._fixed_scale, self._fixed_offset
+        scale, offset, box = self._fixed_scale, self._fixed_offset, self._box
         count = _segments_to_draw(chamber.descendants, chamber.cfg.plant_count,
                                   self._px_for_descendants, self._drawn_px, chamber.pos,
                                   chamber.parent, scale[0], scale[1], offset[0], offset[1],
-                                  self._segments)
+                                  self._segments, box)
         for x0, y0, x1, y1, width in self._segments[:count].tolist():
             cv2.line(self._plant, (x0, y0), (x1, y1), INTENSITY[PLANT], width, cv2.LINE_8,
                      _SHIFT)
+        if count:  # only the pixels the lines can have reached
+            _put_channel(self._plant, self._image, PLANT, box[0], box[1], box[2], box[3])
 
     def _draw_light(self, light: Light) -> None:
         if light.spot:
             self._light.fill(0)  # 7 kB: cheaper than working out what changed
             cv2.circle(self._light, self._fixed_point(complex(light.x, light.z)),
                        self._fixed(light.radius), INTENSITY[LIGHT], -1, cv2.LINE_8, _SHIFT)
-            _put_channel(self._light, self._image, LIGHT)
+            _put_channel(self._light, self._image, LIGHT, 0, self.size, 0, self.size)
         else:  # full-height columns: the plane stays empty
             _move_band(self._image, self._band, light.x, light.width, self._px_per_m)
 
@@ -126,14 +129,16 @@ class Renderer:
 def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: np.ndarray,
                       drawn_px: np.ndarray, pos: np.ndarray, parent: np.ndarray,
                       scale_x: float, scale_y: float, offset_x: float, offset_y: float,
-                      out: np.ndarray) -> int:
+                      out: np.ndarray, box: np.ndarray) -> int:
     """List the segments that are new or thicker than drawn (roots come first, with none).
 
     Returns:
         How many: rows of ``out`` = OpenCV fixed-point start (col, row), end (col, row) and
-        thickness in px; ``drawn_px`` records the new thicknesses.
+        thickness in px; ``drawn_px`` records the new thicknesses and ``box`` the pixel rows
+        [box[0], box[1]) and columns [box[2], box[3]) that drawing them can change.
     """
     count = 0
+    box[0], box[1], box[2], box[3] = 1 << 30, -(1 << 30), 1 << 30, -(1 << 30)
     for node in range(roots, descendants.size):
         px = px_for_descendants[descendants[node]]
         if px <= drawn_px[node]:
@@ -145,16 +150,23 @@ def _segments_to_draw(descendants: np.ndarray, roots: int, px_for_descendants: n
         out[count, 2] = round(end.real * scale_x + offset_x)
         out[count, 3] = round(end.imag * scale_y + offset_y)
         out[count, 4] = px
+        margin = px + 2  # a thick line reaches half its thickness around it; generously
+        box[0] = min(box[0], (min(out[count, 1], out[count, 3]) >> _SHIFT) - margin)
+        box[1] = max(box[1], (max(out[count, 1], out[count, 3]) >> _SHIFT) + margin + 1)
+        box[2] = min(box[2], (min(out[count, 0], out[count, 2]) >> _SHIFT) - margin)
+        box[3] = max(box[3], (max(out[count, 0], out[count, 2]) >> _SHIFT) + margin + 1)
         count += 1
     return count
 
 
 @njit(cache=True)
-def _put_channel(plane: np.ndarray, image: np.ndarray, channel: int) -> None:
-    """Copy an (H, W) plane into one channel of an (H, W, 3) image."""
+def _put_channel(plane: np.ndarray, image: np.ndarray, channel: int, top: int, bottom: int,
+                 left: int, right: int) -> None:
+    """Copy rows [top, bottom) x columns [left, right) of an (H, W) plane (clipped to it) into
+    one channel of an (H, W, 3) image."""
     rows, cols = plane.shape
-    for r in range(rows):
-        for c in range(cols):
+    for r in range(max(top, 0), min(bottom, rows)):
+        for c in range(max(left, 0), min(right, cols)):
             image[r, c, channel] = plane[r, c]
 
 
