@@ -118,7 +118,8 @@ case "$cmd" in
     fi
     setup .venv-compat .venv-compat/ws "$py312" requirements.txt requirements-compat.txt
     sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
-      tests/test_core.py tests/test_envs.py tests/test_digits.py tests/test_agents.py \
+      tests/test_core.py tests/test_kernels.py tests/test_envs.py tests/test_vector_env.py \
+      tests/test_digits.py tests/test_agents.py \
       tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
       tests/test_bridge.py ;;
   *) sed -n '2,9p' "$0"; exit 2 ;;
