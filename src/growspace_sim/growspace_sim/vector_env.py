@@ -248,4 +248,3 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
                 info[f'_{key}'] = has
         info['_light'] = has
         return info
-
