@@ -58,6 +58,10 @@ build() {
        summary- > "$ws/colcon-build.log" 2>&1) \
       || { tail -n 40 "$ws/colcon-build.log" >&2; echo "colcon build failed:" \
              "$ws/colcon-build.log" >&2; exit 1; }
+    # numba compiles the growth kernels once (about 3 s) into its on-disk cache, here rather
+    # than in many processes at once later.
+    PYTHONPATH="$ROOT/src/growspace_sim" "$venv/bin/python" -c \
+      'from growspace_sim.simulation import warm_up; warm_up()'
     touch "$stamp"
   fi
   # Sourced as a ROS user would; the venv holds the ROS underlay (no setup files of its own).
