@@ -17,7 +17,11 @@ photon keeps its nearest node and that distance, updated against the new nodes o
 costs (photons x new nodes) instead of (lit photons x all nodes).
 
 The episode's arrays live in one ``ChamberState`` (``core.state``), created by ``reset``; the
-challenge's ``Task`` (``cfg.task``) decides the layout and the reward.
+challenge's ``Task`` (``cfg.task``) decides the layout and the reward. A step's work on them is
+done by the compiled kernels of ``core.kernels``; this class draws from the episode's random
+stream, keeps the state consistent and offers the views adapters read. When photons are used
+up, the survivors move to the front of their arrays and the state's photon arrays become
+shorter views of them.
 """
 
 from __future__ import annotations
@@ -284,7 +288,8 @@ class Chamber:
 
     @property
     def photons(self) -> np.ndarray:
-        """(M,) complex128 remaining photons (m), sorted by x."""
+        """(M,) complex128 remaining photons (m), sorted by x; later steps overwrite it in place
+        (copy it to keep it)."""
         return self.state.photons
 
     @property
