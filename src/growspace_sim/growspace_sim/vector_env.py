@@ -16,6 +16,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 import numpy as np
 
+from growspace_sim import digits as digit_data
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs import OBSERVATIONS, spaces_for
@@ -52,9 +53,11 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
     read ``chambers[i].tip_positions()``.
 
     ## Arguments
-    ``num_envs`` and ``autoreset_mode``, then as ``GrowSpaceEnv``: ``challenge``, ``setting``,
-    ``continuous``, ``observation``, ``render_mode``, ``digit_source``, ``config`` and any
-    ``SimConfig`` field as a keyword override.
+    ``num_envs``, ``autoreset_mode`` and ``episodes_per_stage`` (the shape curriculum of
+    ``DigitCurriculum``, counted per chamber: digits join in the paper's order every that many
+    resets of a chamber), then as ``GrowSpaceEnv``: ``challenge``, ``setting``, ``continuous``,
+    ``observation``, ``render_mode``, ``digit_source``, ``config`` and any ``SimConfig`` field
+    as a keyword override.
     """
 
     metadata = {'render_modes': ['rgb_array'], 'render_fps': 10,
@@ -65,7 +68,7 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
                  render_mode: str | None = None, digit_source: str = 'auto',
                  config: SimConfig | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-                 **overrides: Any) -> None:
+                 episodes_per_stage: int | None = None, **overrides: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f'num_envs must be an int >= 1, got {num_envs!r}.')
@@ -96,6 +99,14 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
         self._zero_counts = np.zeros(self.cfg.plant_count, np.int64)
         self._chambers = tuple(sim.chamber for sim in self.sims)
         self._started = False
+        if episodes_per_stage is not None and (
+                not self._digits or isinstance(episodes_per_stage, bool)
+                or not isinstance(episodes_per_stage, (int, np.integer))
+                or episodes_per_stage < 1):
+            raise ValueError(f'episodes_per_stage must be None or >= 1 with shape targets, got '
+                             f'{episodes_per_stage!r} ({self.cfg.challenge}).')
+        self.episodes_per_stage = episodes_per_stage
+        self.episodes = [0] * self.num_envs  # begun per chamber (the curriculum's clock)
 
     @property
     def chambers(self) -> tuple[Chamber, ...]:
@@ -120,7 +131,8 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
             The observations of all chambers and the info (see the class docstring).
 
         Raises:
-            ValueError: on a seed list of the wrong length or a bad ``reset_mask``.
+            ValueError: on a seed list of the wrong length, a bad ``reset_mask``, or a mask
+                that leaves chambers out on the first reset.
         """
         seeds = self._seeds(seed)
         mask = np.ones(self.num_envs, bool)
@@ -132,9 +144,12 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
                                  f'({self.num_envs},) with a True, got {mask!r}.')
         elif options:
             raise ValueError(f"options takes only 'reset_mask', got {sorted(options)}.")
+        if not self._started and not mask.all():
+            raise ValueError(f"the first reset must reset every chamber, got options['reset_mask']"
+                             f' = {mask.tolist()}.')
         outcomes: list[StepOutcome | None] = [None] * self.num_envs
         for i in np.flatnonzero(mask).tolist():
-            outcomes[i] = self.sims[i].reset(seed=seeds[i])
+            outcomes[i] = self._reset_chamber(i, seeds[i])
         self._ended[mask] = False
         self._started = True
         return self._observe(), self._info(outcomes)
@@ -165,7 +180,7 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
             else [False] * self.num_envs
         for i, sim in enumerate(self.sims):  # Python lists: numpy scalar access costs more
             if autoreset[i]:
-                outcomes[i] = sim.reset()
+                outcomes[i] = self._reset_chamber(i)
             elif self.continuous:
                 sim.apply_continuous(values[i])
                 outcomes[i] = sim.step()
@@ -199,9 +214,18 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
             final_obs[i] = last[i]
         final_info = self._info(outcomes, ended)
         for i in rows:
-            outcomes[i] = self.sims[i].reset()
+            outcomes[i] = self._reset_chamber(i)
         return {'final_obs': final_obs, '_final_obs': ended.copy(),
                 'final_info': final_info, '_final_info': ended.copy()}
+
+    def _reset_chamber(self, i: int, seed: int | None = None) -> StepOutcome:
+        """Reset chamber i; with a curriculum, first give it the digits of its stage."""
+        if self.episodes_per_stage is not None:
+            stage = min(1 + self.episodes[i] // self.episodes_per_stage,
+                        len(digit_data.CURRICULUM_ORDER))
+            self.sims[i].set_target_digits(digit_data.CURRICULUM_ORDER[:stage])
+        self.episodes[i] += 1
+        return self.sims[i].reset(seed=seed)
 
     def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         if seed is None:
@@ -248,3 +272,10 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
                 info[f'_{key}'] = has
         info['_light'] = has
         return info
+
+
+def make_curriculum_vector(num_envs: int = 1, episodes_per_stage: int = 100,
+                           **kwargs: Any) -> GrowSpaceVectorEnv:
+    """The vector entry point of ``GrowSpace/Shape-Curriculum-v0``: shape chambers, each with
+    the curriculum of ``DigitCurriculum`` (``envs.make_curriculum``)."""
+    return GrowSpaceVectorEnv(num_envs, 'shape', episodes_per_stage=episodes_per_stage, **kwargs)
