@@ -58,6 +58,10 @@ build() {
        summary- > "$ws/colcon-build.log" 2>&1) \
       || { tail -n 40 "$ws/colcon-build.log" >&2; echo "colcon build failed:" \
              "$ws/colcon-build.log" >&2; exit 1; }
+    # numba compiles the growth kernels once (about 3 s) into its on-disk cache, here rather
+    # than in many processes at once later.
+    PYTHONPATH="$ROOT/src/growspace_sim" "$venv/bin/python" -c \
+      'from growspace_sim.simulation import warm_up; warm_up()'
     touch "$stamp"
   fi
   # Sourced as a ROS user would; the venv holds the ROS underlay (no setup files of its own).
@@ -118,7 +122,8 @@ case "$cmd" in
     fi
     setup .venv-compat .venv-compat/ws "$py312" requirements.txt requirements-compat.txt
     sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
-      tests/test_core.py tests/test_envs.py tests/test_digits.py tests/test_agents.py \
+      tests/test_core.py tests/test_kernels.py tests/test_envs.py tests/test_vector_env.py \
+      tests/test_digits.py tests/test_agents.py \
       tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
       tests/test_bridge.py ;;
   *) sed -n '2,9p' "$0"; exit 2 ;;

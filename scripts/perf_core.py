@@ -1,4 +1,4 @@
-"""Where a chamber step's time goes, without Gymnasium (runs on a bare numpy + OpenCV box).
+"""Where a chamber step's time goes, without Gymnasium (runs on a bare numpy + numba + OpenCV box).
 
     python scripts/perf_core.py [--profile]
 """

@@ -1,9 +1,10 @@
 """Gymnasium ids of the GrowSpace environments, registered lazily by entry-point string.
 
 Every registered ``Task`` (``core.task``) gets ``GrowSpace/<env_name>[Continuous]-<Setting>-v0``
-for each of its settings, plus its ``extra_envs``. Importing this module imports Gymnasium and
-the numpy core only, not the environments (nor OpenCV), so that ``import growspace_sim`` stays
-cheap and the core stays importable without OpenCV.
+for each of its settings, plus its ``extra_envs``; each id also gets the native vector env
+(``vector_env``) as its ``vector_entry_point`` (``gymnasium.make_vec``). Importing this
+module imports Gymnasium and the numpy core only, not the environments (nor OpenCV), so that
+``import growspace_sim`` stays cheap and the core stays importable without OpenCV.
 """
 
 from __future__ import annotations
@@ -13,6 +14,11 @@ import gymnasium as gym
 from growspace_sim.core import task as tasks
 
 ENTRY_POINT = 'growspace_sim.envs:GrowSpaceEnv'
+VECTOR_ENTRY_POINT = 'growspace_sim.vector_env:GrowSpaceVectorEnv'  # gymnasium.make_vec
+VECTOR_ENTRY_POINTS = {  # entry point -> the native vector env that plays the same episodes
+    ENTRY_POINT: VECTOR_ENTRY_POINT,
+    'growspace_sim.envs:make_curriculum': 'growspace_sim.vector_env:make_curriculum_vector',
+}
 
 
 def env_id(challenge: str, setting: str, continuous: bool = False) -> str:
@@ -43,5 +49,7 @@ def register_envs() -> list[str]:
         specs.update(task.extra_envs)
     for name, (entry_point, kwargs) in specs.items():
         if name not in gym.registry:
-            gym.register(name, entry_point=entry_point, kwargs=dict(kwargs))
+            gym.register(name, entry_point=entry_point,
+                         vector_entry_point=VECTOR_ENTRY_POINTS.get(entry_point),
+                         kwargs=dict(kwargs))
     return sorted(specs)

@@ -111,3 +111,23 @@ class Simulation:
         if features:
             return self.renderer.features(self.chamber)
         return self.renderer.render(self.chamber)
+
+
+def warm_up() -> None:
+    """Compile every numba kernel a simulation calls, or load it from numba's on-disk cache.
+
+    One short episode per light kind, with a draw of buds among too many (``max_branching``
+    1), so each kernel meets the argument types it meets in use. ``./run.sh build`` calls it
+    once after building, so that processes started together later (vector env workers, test
+    subprocesses) load the cache instead of all compiling it at the same time.
+    """
+    digit = np.full((28, 28), 255, np.uint8)  # any target: no MNIST needed
+    for challenge, overrides in (('control', {}), ('shape', {'max_branching': 1})):
+        cfg = SimConfig(challenge=challenge, episode_length=8, **overrides)
+        chamber, renderer = Chamber(cfg), Renderer(cfg)
+        chamber.reset(np.random.default_rng(0), None if cfg.task.digits is None else digit)
+        renderer.reset(chamber)
+        for action in (0, 1, 2, 3, 4, 5, 6, 2):
+            lights.apply_discrete(chamber.light, action % (7 if cfg.uses_spotlight else 5), cfg)
+            chamber.step()
+            renderer.render(chamber)

@@ -1,4 +1,4 @@
-"""The simulation core: pure numpy, no ROS, no OpenCV, no middleware."""
+"""The simulation core: numpy and numba kernels; no ROS, no OpenCV, no middleware."""
 
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig

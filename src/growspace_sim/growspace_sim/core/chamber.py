@@ -17,7 +17,11 @@ photon keeps its nearest node and that distance, updated against the new nodes o
 costs (photons x new nodes) instead of (lit photons x all nodes).
 
 The episode's arrays live in one ``ChamberState`` (``core.state``), created by ``reset``; the
-challenge's ``Task`` (``cfg.task``) decides the layout and the reward.
+challenge's ``Task`` (``cfg.task``) decides the layout and the reward. A step's work on them is
+done by the compiled kernels of ``core.kernels``; this class draws from the episode's random
+stream, keeps the state consistent and offers the views adapters read. When photons are used
+up, the survivors move to the front of their arrays and the state's photon arrays become
+shorter views of them.
 """
 
 from __future__ import annotations
@@ -27,11 +31,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from growspace_sim.core import kernels
 from growspace_sim.core import light as lights
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.state import ChamberState
 
-_DIRECTION_EPS = 1e-12  # a sum of unit vectors this short has no direction: the bud stays
 ANCESTOR_WINDOW = 64  # ancestors listed per node: deeper ones cost one more gather per 64 levels
 
 
@@ -68,8 +72,14 @@ class Chamber:
         self._column_width = cfg.width_m(cfg.branch_thickness)  # m, shading resolution
         self._columns = int(math.ceil(w / self._column_width))
         self._longest = max(cfg.branch_length_m, cfg.width_m(cfg.first_branch_height))
-        self._sample_steps: dict[int, np.ndarray] = {}
         self._capacity = 2 * cfg.plant_count + cfg.max_branching * cfg.episode_length
+        self._column_steps = self._steps(self._column_width)  # canopy samples per segment
+        self._pixel_steps = self._steps(0.5 * self._pixel)  # occupancy samples per segment
+        # the kernels' work arrays (np.zeros: pages are mapped only as nodes grow)
+        self._pull = np.zeros(self._capacity, np.complex128)  # per node: sum of unit vectors
+        self._strength = np.zeros(self._capacity)  # its length
+        self._buds = np.zeros(self._capacity, np.intp)
+        self._new = np.zeros(cfg.max_branching, np.complex128)
         self._window = min(cfg.episode_length + 2, ANCESTOR_WINDOW)
         self._deep = cfg.episode_length + 2 > ANCESTOR_WINDOW  # a node can outgrow its row
         self.state: ChamberState | None = None
@@ -117,6 +127,7 @@ class Chamber:
             target=layout.target, nearest=np.full(n, np.inf), target_mask=target_mask,
             occupancy=np.zeros((self._res, self._res), bool),
             light=lights.initial_light(cfg, layout.light_x, layout.light_z), steps=0, rng=rng)
+        self._bind(state)
         self._append(state, roots + 1j * cfg.width_m(cfg.first_branch_height), np.arange(n))
         return state
 
@@ -151,11 +162,11 @@ class Chamber:
                    photons: np.ndarray) -> np.ndarray:
         """Flag the photons that would attract if lit: a node within reach, nothing above.
 
-        Both only change when the plant grows, so a step without growth only slices this.
+        Both only change when the plant grows, so a step without growth reads this as it is.
         """
-        available = distance < self._influence
-        if self.cfg.shading:
-            available &= canopy[column] <= photons.imag
+        available = np.empty(photons.size, bool)
+        kernels.mark_available(available, photons, column, distance, canopy, self._influence,
+                               self.cfg.shading)
         return available
 
     def _scatter_photons(self, rng: np.random.Generator) -> np.ndarray:
@@ -190,134 +201,58 @@ class Chamber:
         return self._outcome(grown)
 
     def _grow(self, s: ChamberState) -> int:
-        cfg, light = self.cfg, s.light
+        light = s.light
         half_span = light.radius if light.spot else 0.5 * light.width
-        x = s.photon_x
-        span = slice(int(x.searchsorted(light.x - half_span, 'left')),
-                     int(x.searchsorted(light.x + half_span, 'right')))
-        photons, distance = s.photons[span], s.nearest_distance[span]
-        attracting = s.available[span]  # a view: read only
-        if light.spot:
-            attracting = attracting & (np.abs(photons - complex(light.x, light.z))
-                                       <= light.radius)
-        if not attracting.any():
-            return 0
-        nodes = s.nearest_node[span][attracting]
-        pull = np.zeros(s.n_nodes, np.complex128)  # per node: sum of unit vectors
-        np.add.at(pull, nodes, (photons[attracting] - s.pos[nodes]) / distance[attracting])
-        strength = np.abs(pull)
-        buds = np.flatnonzero(strength > _DIRECTION_EPS)
-        if buds.size > cfg.max_branching:
-            buds = np.sort(s.rng.choice(buds, cfg.max_branching, replace=False))
-        new = s.pos[buds] + self._branch_length * pull[buds] / strength[buds]
-        w, h = cfg.chamber_width, cfg.chamber_height
-        inside = [0.0 <= p.real <= w and 0.0 <= p.imag <= h for p in new.tolist()]
-        if not all(inside):  # a segment that would pierce a wall, floor or ceiling: not grown
-            buds, new = buds[inside], new[inside]
-            if buds.size == 0:
-                return 0
-        self._append(s, new, buds)
-        return int(buds.size)
+        count, grown = kernels.grow(
+            s.photons, s.photon_x, s.nearest_node, s.nearest_distance, s.available, s.n_nodes,
+            light.x - half_span, light.x + half_span, light.spot, complex(light.x, light.z),
+            light.radius, *self._grow_args)
+        if grown < 0:  # more buds than may grow: a seeded draw picks them
+            buds = np.sort(s.rng.choice(self._buds[:count], self.cfg.max_branching,
+                                        replace=False))
+            grown = kernels.sprout(buds, *self._sprout_args)
+        else:
+            buds = self._buds
+        if grown:
+            self._append(s, self._new[:grown], buds[:grown])
+        return grown
 
     def _append(self, s: ChamberState, new: np.ndarray, parents: np.ndarray) -> None:
         """Add nodes with segments to their parents and update what depends on them."""
-        start, end = s.n_nodes, s.n_nodes + new.size
-        s.n_nodes = end
-        plants = s.plant[parents]
-        s.pos[start:end] = new
-        s.parent[start:end] = parents
-        s.plant[start:end] = plants
-        s.has_child[parents] = True
-        s.branch_counts += np.bincount(plants, minlength=s.branch_counts.size)
-        depth = s.depth[parents]
-        s.depth[start:end] = depth + 1
-        self._count_descendants(s, parents, depth, start, end)
-        if s.target is not None:
-            np.minimum.at(s.nearest, plants, np.abs(new - s.target))
-        if s.target_mask is not None:
-            self._rasterise(s, self._samples(s.pos[parents], new, 0.5 * self._pixel))
-        self._update_photons(s, s.pos[parents], new, start)
+        start = s.n_nodes
+        s.n_nodes = start + new.size
+        left = kernels.append(new, parents, start, s.photons, s.photon_x, s.photon_column,
+                              s.nearest_node, s.nearest_distance, s.available,
+                              *self._append_args)
+        if left < s.photons.size:  # the survivors are the first ones: keep those
+            s.photons, s.photon_x, s.photon_column = \
+                s.photons[:left], s.photon_x[:left], s.photon_column[:left]
+            s.nearest_node, s.nearest_distance, s.available = \
+                s.nearest_node[:left], s.nearest_distance[:left], s.available[:left]
         self._outcome_cache = self._tips_cache = None
 
-    def _count_descendants(self, s: ChamberState, parents: np.ndarray, depth: np.ndarray,
-                           start: int, end: int) -> None:
-        """Give the new nodes start..end their ancestor rows and add one descendant to each
-        of their ancestors.
-
-        A row holds the ``window`` nearest ancestors; a node deeper than that reaches the rest
-        through the row of its oldest listed ancestor, and so on up to the root.
-        """
-        window, table = self._window, s.ancestors
-        ancestors = table[parents]
-        if not self._deep:  # episodes shorter than the window: every row lists all ancestors
-            ancestors[np.arange(parents.size), depth] = parents + 1
-            table[start:end] = ancestors
-            s.descendants[:end + 1] += np.bincount(ancestors.ravel(), minlength=end + 1)
-            return
-        ancestors[np.arange(parents.size), depth % window] = parents + 1
-        table[start:end] = ancestors
-        counts = np.bincount(ancestors.ravel(), minlength=end + 1)
-        incomplete = depth >= window
-        anchors = ancestors[incomplete, (depth[incomplete] + 1) % window] - 1
-        while anchors.size:
-            rows = table[anchors]
-            counts += np.bincount(rows.ravel(), minlength=end + 1)
-            anchor_depth = s.depth[anchors]
-            incomplete = anchor_depth > window
-            anchors = rows[incomplete, anchor_depth[incomplete] % window] - 1
-        s.descendants[:end + 1] += counts
-
-    def _update_photons(self, s: ChamberState, a: np.ndarray, b: np.ndarray,
-                        first: int) -> None:
-        """Re-point photons to the new nodes b (numbered from ``first``) where those are nearer,
-        use up the photons at them and raise the canopy over the segments a-b."""
-        distances = np.abs(s.photons[:, None] - b)
-        closest = distances.argmin(axis=1)  # ties go to the older node, as argmin over all does
-        distance = distances.min(axis=1)
-        nearer = distance < s.nearest_distance
-        s.nearest_node[nearer] = first + closest[nearer]
-        s.nearest_distance[nearer] = distance[nearer]
-        alive = distance >= self._kill
-        if not alive.all():
-            s.photons = s.photons[alive]
-            s.photon_x = s.photon_x[alive]
-            s.photon_column = s.photon_column[alive]
-            s.nearest_node = s.nearest_node[alive]
-            s.nearest_distance = s.nearest_distance[alive]
-        self._shade(s.canopy, a, b)
-        s.available = self._available(s.nearest_distance, s.canopy, s.photon_column, s.photons)
-
-    def _shade(self, canopy: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
-        """Raise the canopy (top of the plant per column) over the segments a-b.
-
-        Columns are one branch thickness wide. Points sampled along each segment one column
-        apart, each widened by half the thickness to both sides, mark every column the
-        thickened segment covers, at the height of a point at most one column away.
-        """
-        points = self._samples(a, b, self._column_width)
-        half = self._half_thickness
-        columns = self._column_of(np.concatenate((points.real - half, points.real + half)))
-        top = points.imag + half
-        np.maximum.at(canopy, columns, np.concatenate((top, top)))
+    def _bind(self, s: ChamberState) -> None:
+        """Gather the kernels' arguments that stay the same for the whole episode."""
+        cfg, target = self.cfg, s.target is not None
+        self._sprout_args = (self._pull, self._strength, s.pos, self._branch_length,
+                             cfg.chamber_width, cfg.chamber_height, self._new)
+        self._grow_args = (cfg.max_branching, self._buds) + self._sprout_args
+        self._append_args = (
+            s.pos, s.parent, s.plant, s.has_child, s.depth, s.ancestors, s.descendants,
+            self._deep, s.branch_counts, target, s.target if target else 0j, s.nearest,
+            s.target_mask is not None, s.occupancy, self._pixel_steps,
+            self._res / cfg.chamber_width, self._res / cfg.chamber_height, cfg.chamber_height,
+            s.canopy, self._column_steps, self._half_thickness, 1.0 / self._column_width,
+            self._kill, self._influence, cfg.shading)
 
     def _column_of(self, x: np.ndarray) -> np.ndarray:
         column = (x * (1.0 / self._column_width)).astype(np.intp)
         return np.minimum(np.maximum(column, 0), self._columns - 1)
 
-    def _samples(self, a: np.ndarray, b: np.ndarray, spacing: float) -> np.ndarray:
-        """Points along segments a-b (of at most one branch length), at most ``spacing`` apart."""
-        count = int(self._longest / spacing) + 2
-        t = self._sample_steps.get(count)
-        if t is None:
-            t = self._sample_steps[count] = np.linspace(0.0, 1.0, count)
-        return (a[:, None] + (b - a)[:, None] * t).ravel()
-
-    def _rasterise(self, s: ChamberState, points: np.ndarray) -> None:
-        """Mark the image pixels that sampled segment points fall in (the plant's pixel set)."""
-        res, cfg = self._res, self.cfg
-        col = (points.real * (res / cfg.chamber_width)).astype(np.intp)
-        row = ((cfg.chamber_height - points.imag) * (res / cfg.chamber_height)).astype(np.intp)
-        s.occupancy[np.minimum(row, res - 1), np.minimum(col, res - 1)] = True
+    def _steps(self, spacing: float) -> np.ndarray:
+        """Where to sample a segment (of at most one branch length), at most ``spacing`` apart:
+        fractions of its length from 0 to 1."""
+        return np.linspace(0.0, 1.0, int(self._longest / spacing) + 2)
 
     def _outcome(self, grown: int) -> StepOutcome:
         if self._outcome_cache is None:  # the reward changes only when the plant grows
@@ -353,7 +288,8 @@ class Chamber:
 
     @property
     def photons(self) -> np.ndarray:
-        """(M,) complex128 remaining photons (m), sorted by x."""
+        """(M,) complex128 remaining photons (m), sorted by x; later steps overwrite it in place
+        (copy it to keep it)."""
         return self.state.photons
 
     @property
