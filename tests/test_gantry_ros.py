@@ -114,9 +114,15 @@ def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
                                lambda m, _: reached.__setitem__(m.step_id, m))
             listener.subscribe(types.STEP_RESULT, 'step_result', COMMAND_QOS,
                                lambda m, _: results.append(m))
+            ready: list = []  # gantry/status (1 Hz and on change) at level OK: Idle, connected
+            listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status',
+                               COMMAND_QOS, lambda m, _: ready.extend(
+                                   s for s in m.status if s.level == 0))
             deadline = time.monotonic() + 20.0
-            while not listener.matched('step_result') and time.monotonic() < deadline:
+            while not (listener.matched('step_result') and ready) \
+                    and time.monotonic() < deadline:
                 listener.spin_once(0.05)
+            assert ready, 'the gantry never reported itself ready'
             played: list = []
 
             def replay() -> None:

@@ -212,16 +212,20 @@ def test_a_flood_of_commands_is_answered_without_loss(fresh: Client) -> None:
     fresh.node.create_subscription(StepResult, 'step_result', answers.append,
                                    rclpy.qos.QoSProfile(
                                        depth=1, history=rclpy.qos.HistoryPolicy.KEEP_ALL))
-    fresh.drain(0.5)  # the node matches the new reader
+    # Sent with the node's own command QoS (keep_all): a keep_last writer would overwrite
+    # commands the node has not acknowledged yet whenever it falls behind.
+    sender = fresh.node.create_publisher(LightCommand, 'light/command', rclpy.qos.QoSProfile(
+        depth=1, history=rclpy.qos.HistoryPolicy.KEEP_ALL))
+    fresh.drain(0.5)  # the node matches the new reader and writer
     reset_and_wait(fresh, 150, seed=3)
     for i in range(1, flood + 1):
-        fresh.command.publish(LightCommand(step_id=i, mode=LightCommand.MODE_DISCRETE,
-                                           action=i % 5))
+        sender.publish(LightCommand(step_id=i, mode=LightCommand.MODE_DISCRETE, action=i % 5))
     assert fresh.spin_until(lambda: sum(r.reset_id == 150 and r.step_id > 0
                                         for r in answers) >= flood, 60.0)
     fresh.drain(0.2)
     ids = sorted(r.step_id for r in answers if r.reset_id == 150 and r.step_id > 0)
     assert ids == list(range(1, flood + 1))
+    fresh.node.destroy_publisher(sender)
 
 
 def test_same_seed_gives_same_episode_other_seed_differs(fresh: Client) -> None:

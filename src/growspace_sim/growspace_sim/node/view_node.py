@@ -30,6 +30,7 @@ from growspace_sim import convert
 from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.simulation import warm_up
 from growspace_sim.view import markers
 from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
 from growspace_sim.view.scene import Scene, ViewInputError
@@ -226,6 +227,9 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         transport = RclpyTransport(NODE_NAME, args=['view_node', *argv])
         try:
             values = read_parameters(transport.node)
+            # The view re-simulates the chamber: load the compiled kernels before subscribing,
+            # or the first frame's load stalls the inputs long enough to drop a burst of them.
+            warm_up()
             view = ViewNode(transport, values['view_size'],
                             foxglove_factory(values) if values['foxglove_port'] else None)
         except (ValueError, RuntimeError) as e:
