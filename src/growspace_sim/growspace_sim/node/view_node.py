@@ -41,12 +41,15 @@ MARKERS_TOPIC = 'plant/markers'
 IMAGE_TOPIC = 'camera/image_view'
 RESET_SRV = 'growspace_msgs/srv/Reset'
 RESET_WAIT_S = 5.0  # how long a Foxglove reset call waits for the chamber's answer [s]
+# The view re-simulates from every light/state in turn, so a burst it is slow to read must wait
+# in its queue rather than be dropped: 100 messages, 2 s of a 50 Hz chamber.
+STEP_INPUT_QOS = ros_qos.QosProfile(depth=100)
 # (key, topic, type, QoS) of what the view reads; the image is forwarded to Foxglove only.
 INPUTS = (
     ('config', 'chamber/config', STRING, ros_qos.LATCHED),
-    ('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
-    ('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
-    ('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
+    ('plant', 'plant/state', types.PLANT_STATE, STEP_INPUT_QOS),
+    ('light', 'light/state', types.LIGHT_COMMAND, STEP_INPUT_QOS),
+    ('result', 'step_result', types.STEP_RESULT, STEP_INPUT_QOS),
 )
 FOXGLOVE_ONLY = (('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),)
 PARAMETERS = {  # name: (default, description)
