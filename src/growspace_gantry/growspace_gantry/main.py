@@ -1,4 +1,5 @@
-"""``gantry_node`` entry point: the LED gantry on rclpy (``ros2 run growspace_gantry gantry_node``).
+"""``gantry_node`` entry point: the LED gantry on rclpy (``ros2 run growspace_gantry
+gantry_node``).
 
 Exit codes: 0 after SIGINT or SIGTERM (the lamp is switched off and the machine left idle
 first); 2 for an invalid parameter or calibration (one line naming it, its value and what is
@@ -10,10 +11,9 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 import sys
 import threading
-from typing import Sequence
+from typing import Any, Sequence
 
 from growspace_gantry import calibration
 from growspace_gantry.controller import GrblController, Log
@@ -22,10 +22,9 @@ from growspace_gantry.node import GantryNode
 from growspace_gantry.settings import GANTRY_BOUNDS, GantryParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
-from growspace_sim.node.main import make_recorder
+from growspace_sim.node.main import console_main, make_recorder, run_node
 from growspace_sim.node.params import ParamError
 
-EXIT_BAD_PARAM = 2
 NODE_NAME = 'growspace_gantry'
 
 log = logging.getLogger('growspace_gantry.gantry_node')
@@ -44,26 +43,16 @@ def default_calibration() -> str:
 
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the node until SIGINT/SIGTERM or ``stop``; the lamp is off when it returns."""
-    from growspace_sim.node.rclpy_transport import RclpyTransport
-
-    transport = node = None
-    try:
-        transport = RclpyTransport(NODE_NAME, args=['gantry_node', *argv],
-                                   automatic_overrides=True)
-        try:
-            # Read at start-up only (read-only parameters): a rig is reconfigured by restart.
-            specs = params.specs_of(SimConfig, GantryParams, bounds=GANTRY_BOUNDS,
-                                    runtime=False)
-            values, unknown = transport.declare_parameters(specs, params.check_type)
-            if unknown:
-                transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
-                                      f'{unknown}: not parameters of gantry_node (a typo?)')
-            cfg, settings = params.build(values, GantryParams)
-            cal = calibration.load(settings.calibration or default_calibration())
-            recorder = make_recorder(settings.record_path)
-        except (ParamError, calibration.CalibrationError) as e:
-            print(f'gantry_node: invalid parameter: {e}', file=sys.stderr)
-            return EXIT_BAD_PARAM
+    def start(transport: Any) -> GantryNode:
+        # Read at start-up only (read-only parameters): a rig is reconfigured by restart.
+        specs = params.specs_of(SimConfig, GantryParams, bounds=GANTRY_BOUNDS, runtime=False)
+        values, unknown = transport.declare_parameters(specs, params.check_type)
+        if unknown:
+            transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
+                                  f'{unknown}: not parameters of gantry_node (a typo?)')
+        cfg, settings = params.build(values, GantryParams)
+        cal = calibration.load(settings.calibration or default_calibration())
+        recorder = make_recorder(settings.record_path)
         logger = transport.logger
         controller = GrblController(lambda: SerialLink(settings.port, settings.baud), cal,
                                     Log(logger.warn, logger.info), 1.0 / settings.status_hz)
@@ -71,29 +60,15 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         logger.info(f'gantry_node {transport.resolve("~")}: {settings.mode} mode, '
                     f'{cfg.challenge} light, port {settings.port}'
                     + (f', recording to {settings.record_path}' if recorder else ''))
-        transport.spin(stop.is_set)
-    except Exception as e:  # noqa: BLE001 - the context shut down under us: a signal
-        if not stop.is_set():
-            raise
-        log.debug('stopped during start-up: %s', e)
-    finally:
-        if node is not None:
-            node.close()
-        if transport is not None:
-            transport.close()
-    return 0
+        return node
+    return run_node('gantry_node', NODE_NAME, argv, stop, start,
+                    bad_input=(ParamError, calibration.CalibrationError))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script ``gantry_node``."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    logging.basicConfig(level=logging.INFO, format='[%(levelname)s] [%(name)s]: %(message)s')
-    code = run(sys.argv[1:] if argv is None else list(argv), stop)
-    if stop.is_set():
-        log.info('gantry_node stopped by a signal (lamp off, machine idle)')
-    return code
+    return console_main(run, argv, 'gantry_node stopped by a signal (lamp off, machine idle)',
+                        log)
 
 
 if __name__ == '__main__':

@@ -18,7 +18,7 @@ import os
 import signal
 import sys
 import threading
-from typing import Sequence
+from typing import Any, Callable, Protocol, Sequence
 
 from growspace_sim.node import params
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
@@ -54,38 +54,49 @@ def installed_executable() -> str:
     return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim', 'sim_node')
 
 
-def run(argv: Sequence[str], stop: threading.Event) -> int:
-    """Run the node until the context shuts down (SIGINT, SIGTERM) or ``stop`` is set."""
+class Closeable(Protocol):
+    def close(self) -> None: ...
+
+
+def run_node(executable: str, node_name: str, argv: Sequence[str], stop: threading.Event,
+             start: Callable[[Any], Closeable], *,
+             bad_input: tuple[type[Exception], ...] = (ParamError,),
+             automatic_overrides: bool = True) -> int:
+    """Run a node on rclpy until the context shuts down (SIGINT, SIGTERM) or ``stop`` is set.
+
+    The one run loop of sim_node, gantry_node and view_node.
+
+    Args:
+        executable: The console script's name, for the command line and messages.
+        node_name: The default ROS node name (``-r __node:=`` overrides it).
+        argv: The command line after the executable (``--ros-args ...``).
+        stop: Set by a signal; the loop ends at the next callback boundary.
+        start: Builds the node on the ``RclpyTransport``; what it returns is closed at the
+            end, before the transport.
+        bad_input: Exceptions of ``start`` that mean an invalid parameter: one line on stderr
+            and exit status 2.
+        automatic_overrides: Declare every ``-p``/params-file value (see ``RclpyTransport``).
+
+    Returns:
+        The exit status: 0 after a signal, 2 for an invalid parameter.
+    """
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     transport: RclpyTransport | None = None
-    node: ChamberNode | None = None
+    node: Closeable | None = None
     try:
-        transport = RclpyTransport(params.DEFAULT_NODE_NAME, args=['sim_node', *argv],
-                                   automatic_overrides=True)
+        transport = RclpyTransport(node_name, args=[executable, *argv],
+                                   automatic_overrides=automatic_overrides)
         try:
-            values, unknown = transport.declare_parameters(params.specs(), params.check_type)
-            if unknown:
-                transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
-                                      f'{unknown}: not parameters of sim_node (a typo?); '
-                                      f'config/growspace.yaml lists them all.')
-            cfg, node_params = params.build(values)
-            recorder = make_recorder(node_params.record_path)
-        except ParamError as e:
-            print(f'sim_node: invalid parameter: {e}', file=sys.stderr)
+            node = start(transport)
+        except bad_input as e:
+            print(f'{executable}: invalid parameter: {e}', file=sys.stderr)
             return EXIT_BAD_PARAM
-        show = transport.show_parameters  # the challenge parameters follow a reset's switch
-        node = ChamberNode(transport, cfg, node_params, recorder, on_reconfigure=lambda c: show(
-            {'challenge': c.challenge, 'setting': c.setting}))
-        transport.on_parameter_change(node.propose)
-        transport.logger.info(
-            f'sim_node {transport.resolve("~")}: {node_params.mode} mode, seed {node.seed}'
-            + (f', recording to {node_params.record_path}' if recorder else ''))
         transport.spin(stop.is_set)
     except Exception as e:  # noqa: BLE001 - the context shut down under us: a signal
         if not stop.is_set():
             raise
-        log.debug('stopped during start-up: %s', e)
+        log.debug('%s stopped during start-up: %s', executable, e)
     finally:
         if node is not None:
             node.close()
@@ -94,16 +105,45 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
     return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``sim_node``."""
+def console_main(run: Callable[[list[str], threading.Event], int],
+                 argv: Sequence[str] | None, stopped_line: str = '',
+                 logger: logging.Logger = log) -> int:
+    """A console script's ``main``: signals only set the stop flag (see the module docstring),
+    log lines go to stderr, and ``stopped_line`` is logged to ``logger`` after a signal."""
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     logging.basicConfig(level=logging.INFO, format='[%(levelname)s] [%(name)s]: %(message)s')
     code = run(sys.argv[1:] if argv is None else list(argv), stop)
-    if stop.is_set():
-        log.info('sim_node stopped by a signal')
+    if stop.is_set() and stopped_line:
+        logger.info(stopped_line)
     return code
+
+
+def run(argv: Sequence[str], stop: threading.Event) -> int:
+    """Run sim_node until the context shuts down (SIGINT, SIGTERM) or ``stop`` is set."""
+    def start(transport: Any) -> ChamberNode:
+        values, unknown = transport.declare_parameters(params.specs(), params.check_type)
+        if unknown:
+            transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
+                                  f'{unknown}: not parameters of sim_node (a typo?); '
+                                  f'config/growspace.yaml lists them all.')
+        cfg, node_params = params.build(values)
+        recorder = make_recorder(node_params.record_path)
+        show = transport.show_parameters  # the challenge parameters follow a reset's switch
+        node = ChamberNode(transport, cfg, node_params, recorder, on_reconfigure=lambda c: show(
+            {'challenge': c.challenge, 'setting': c.setting}))
+        transport.on_parameter_change(node.propose)
+        transport.logger.info(
+            f'sim_node {transport.resolve("~")}: {node_params.mode} mode, seed {node.seed}'
+            + (f', recording to {node_params.record_path}' if recorder else ''))
+        return node
+    return run_node('sim_node', params.DEFAULT_NODE_NAME, argv, stop, start)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script ``sim_node``."""
+    return console_main(run, argv, 'sim_node stopped by a signal')
 
 
 if __name__ == '__main__':

@@ -20,14 +20,13 @@ the node never stops for bad input. Exit codes: 0 after SIGINT/SIGTERM, 2 for a 
 
 from __future__ import annotations
 
-import logging
-import signal
 import sys
 import threading
 from typing import Any, Callable, Sequence
 
 from growspace_sim import convert
 from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.node.main import console_main, run_node
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import warm_up
@@ -35,7 +34,6 @@ from growspace_sim.view import markers
 from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
 from growspace_sim.view.scene import Scene, ViewInputError
 
-EXIT_BAD_PARAM = 2
 NODE_NAME = 'growspace_view'
 MARKERS_TOPIC = 'plant/markers'
 IMAGE_TOPIC = 'camera/image_view'
@@ -58,8 +56,6 @@ PARAMETERS = {  # name: (default, description)
     'foxglove_address': ('127.0.0.1', 'address the Foxglove server binds; another address '
                          'lets anyone who reaches it watch and drive the light'),
 }
-
-log = logging.getLogger('growspace_sim.view_node')
 
 
 class ViewNode:
@@ -223,45 +219,25 @@ def foxglove_factory(values: dict[str, Any]) -> Callable[..., Any]:
 
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the view node until SIGINT/SIGTERM (or ``stop``)."""
-    from growspace_sim.node.rclpy_transport import RclpyTransport
-
-    transport = view = None
-    try:
-        transport = RclpyTransport(NODE_NAME, args=['view_node', *argv])
-        try:
-            values = read_parameters(transport.node)
-            # The view re-simulates the chamber: load the compiled kernels before subscribing,
-            # or the first frame's load stalls the inputs long enough to drop a burst of them.
-            warm_up()
-            view = ViewNode(transport, values['view_size'],
-                            foxglove_factory(values) if values['foxglove_port'] else None)
-        except (ValueError, RuntimeError) as e:
-            print(f'view_node: invalid parameter: {e}', file=sys.stderr)
-            return EXIT_BAD_PARAM
+    def start(transport: Any) -> ViewNode:
+        values = read_parameters(transport.node)
+        # The view re-simulates the chamber: load the compiled kernels before subscribing, or
+        # the first frame's load stalls the inputs long enough to drop a burst of them.
+        warm_up()
+        view = ViewNode(transport, values['view_size'],
+                        foxglove_factory(values) if values['foxglove_port'] else None)
         where = '' if view.fox is None else \
             f', Foxglove on ws://{view.fox.host}:{view.fox.port}'
         transport.logger.info(f'view_node {transport.resolve("~")}: {values["view_size"]} px'
                               + where)
-        transport.spin(stop.is_set)
-    except Exception as e:  # noqa: BLE001 - the context shut down under us: a signal
-        if not stop.is_set():
-            raise
-        log.debug('stopped during start-up: %s', e)
-    finally:
-        if view is not None:
-            view.close()
-        if transport is not None:
-            transport.close()
-    return 0
+        return view
+    return run_node('view_node', NODE_NAME, argv, stop, start,
+                    bad_input=(ValueError, RuntimeError), automatic_overrides=False)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script ``view_node``."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    logging.basicConfig(level=logging.INFO, format='[%(levelname)s] [%(name)s]: %(message)s')
-    return run(sys.argv[1:] if argv is None else list(argv), stop)
+    return console_main(run, argv)
 
 
 if __name__ == '__main__':
