@@ -138,19 +138,19 @@ class McapScan:
                 pos = resume
                 stream.seek(pos)
                 continue
-            content = stream.read(length)
             if opcode == Opcode.CHUNK:
-                yield from self._chunk(pos, end, content)
+                yield from self._chunk(pos, end, stream.read(length))
             elif opcode in _PARSERS:
                 try:
-                    record = _PARSERS[opcode].read(ReadDataStream(io.BytesIO(content)))
+                    record = _PARSERS[opcode].read(ReadDataStream(io.BytesIO(
+                        stream.read(length))))
                 except Exception as e:  # noqa: BLE001 - any parse failure: skip the record
                     self._lose(pos, end, _PARSERS[opcode].__name__.lower(), _text(e))
                 else:
                     yield record
             elif opcode == Opcode.MESSAGE:  # a message outside chunks (unchunked files)
                 try:
-                    yield Message.read(ReadDataStream(io.BytesIO(content)), length)
+                    yield Message.read(ReadDataStream(io.BytesIO(stream.read(length))), length)
                 except Exception as e:  # noqa: BLE001 - as above
                     self._lose(pos, end, 'message', _text(e))
             elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
@@ -158,6 +158,7 @@ class McapScan:
                 self.stopped_at = pos
                 return
             pos = end  # header, indexes, attachments: nothing a chamber reader needs
+            stream.seek(pos)  # also where a consumer that used the stream between yields left it
 
     def _chunk(self, pos: int, end: int, content: bytes) -> Iterator[Record]:
         """The records of one chunk, or none and a ``Damage`` if any of it is unreadable."""
