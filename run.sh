@@ -125,6 +125,6 @@ case "$cmd" in
       tests/test_core.py tests/test_kernels.py tests/test_envs.py tests/test_vector_env.py \
       tests/test_digits.py tests/test_agents.py \
       tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
-      tests/test_bridge.py ;;
+      tests/test_bridge.py tests/test_view.py tests/test_view_ros.py tests/test_bag_damage.py ;;
   *) sed -n '2,9p' "$0"; exit 2 ;;
 esac
