@@ -7,7 +7,7 @@ import re
 
 from growspace_sim.convert import MAX_SEED
 from growspace_sim.core.config import Bounds
-from growspace_sim.node.params import MODES, ParamError
+from growspace_sim.node.params import check_bounds, MODES, ParamError
 
 # The ranges of GantryParams' number fields: what validation checks and ROS parameters show.
 GANTRY_BOUNDS = {
@@ -38,11 +38,7 @@ class GantryParams:
             raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
         if not isinstance(self.port, str) or not self.port:
             raise ParamError(f'port must be a serial device path, got {self.port!r}.')
-        for name, bounds in GANTRY_BOUNDS.items():
-            try:
-                bounds.check(name, getattr(self, name))
-            except ValueError as e:
-                raise ParamError(str(e)) from None
+        check_bounds(self, GANTRY_BOUNDS)
         if not isinstance(self.frame_id, str) or not re.fullmatch(r'[A-Za-z0-9_/]+',
                                                                   self.frame_id):
             raise ParamError(f'frame_id must be a frame name of letters, digits, _ and /, '

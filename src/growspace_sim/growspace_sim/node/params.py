@@ -40,6 +40,19 @@ class ParamError(ValueError):
     """An invalid parameter; the message names it, its value and what is allowed."""
 
 
+def check_bounds(settings: Any, bounds: dict[str, Bounds]) -> None:
+    """Check a settings object's number fields against their bounds.
+
+    Raises:
+        ParamError: naming the first field out of bounds, its value and what is allowed.
+    """
+    for name, field_bounds in bounds.items():
+        try:
+            field_bounds.check(name, getattr(settings, name))
+        except ValueError as e:
+            raise ParamError(str(e)) from None
+
+
 @dataclass(frozen=True)
 class NodeParams:
     """Settings of the node itself (not of the simulated chamber), validated on construction."""
@@ -55,11 +68,7 @@ class NodeParams:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
-        for name, bounds in NODE_BOUNDS.items():
-            try:
-                bounds.check(name, getattr(self, name))
-            except ValueError as e:
-                raise ParamError(str(e)) from None
+        check_bounds(self, NODE_BOUNDS)
         if not isinstance(self.auto_reset, bool):
             raise ParamError(f'auto_reset must be a bool, got {self.auto_reset!r}.')
         for name in ('frame_id', 'image_frame_id'):

@@ -184,7 +184,6 @@ class McapScan:
                 start_time = min(c.message_start_time for c in covered)
                 end_time = max(c.message_end_time for c in covered)
         self.damage.append(Damage(offset, end, what, reason, start_time, end_time))
-        self._stream.seek(end)
 
     def _stop(self, pos: int, size: int, reason: str) -> None:
         self.stopped_at, self.reason = pos, reason

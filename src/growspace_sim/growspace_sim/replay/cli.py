@@ -83,9 +83,9 @@ def main(argv: list[str] | None = None) -> int:
                 report = resimulate(args.bag, args.namespace, digit_source=args.digit_source,
                                     progress=progress)
             for warning in report.warnings:
-                print(f'warning: {warning}', file=sys.stderr)
+                warn(warning)
             for part in report.unreadable:
-                print(f'warning: skipped unreadable {part}', file=sys.stderr)
+                warn(f'skipped unreadable {part}')
             if report.mismatch is not None:
                 print(f'MISMATCH at {report.mismatch} (after {report.steps} matching steps)')
                 return 1
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
 
             n = export_with_view(args.bag, args.out, namespace=args.namespace,
                                  view_size=args.view_size, overwrite=args.overwrite,
-                                 warn=lambda line: print(f'warning: {line}', file=sys.stderr))
+                                 warn=warn)
             print(f'wrote {args.out} with {n} view frames (plant/markers, camera/image_view)')
         elif args.command == 'export':
             n = export_episode(args.bag, args.out, episode=args.episode, fps=args.fps,

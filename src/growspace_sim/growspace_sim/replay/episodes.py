@@ -54,12 +54,17 @@ class Episode:
         return self.gaps + [f'unreadable {part}' for part in self.unreadable]
 
     @property
+    def stepped(self) -> list[StepRecord]:
+        """The steps after the reset (all of ``steps`` when the reset was not recorded)."""
+        return self.steps[1:] if self.reset_recorded else self.steps
+
+    @property
     def n_steps(self) -> int:
-        return len(self.steps) - (1 if self.reset_recorded else 0)
+        return len(self.stepped)
 
     @property
     def episode_return(self) -> float:
-        return float(sum(s.result.reward for s in self.steps[1 if self.reset_recorded else 0:]))
+        return float(sum(s.result.reward for s in self.stepped))
 
     @property
     def done(self) -> bool:

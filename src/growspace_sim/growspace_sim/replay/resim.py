@@ -122,7 +122,7 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
             outcome = sim.reset(seed=episode.seed)
             mismatch = _compare_step(sim, outcome, episode, episode.steps[0], report) \
                 if episode.reset_recorded else None
-            for record in episode.steps[1 if episode.reset_recorded else 0:]:
+            for record in episode.stepped:
                 if mismatch is not None:
                     break
                 _apply_command(sim, record, lockstep)
