@@ -10,10 +10,10 @@ down, so the fastest round is the closest to the true cost):
 - ``record``: the same plus ``McapRecorder`` writing zstd chunks to a file;
 - ``mcap``: the same with mcap's own ``Writer`` (zstd chunks of the same size) behind the same
   recorder interface: what our chunk writer (``recording/chunk_writer.py``) must beat to stay.
-Overhead = node / record - 1 (target <= 10 %), in wall time and in CPU time of the whole
-process (the recorder compresses and writes on a worker thread; on 2 cores that thread competes
-with the chamber, so process CPU is the honest measure of what recording costs). Bytes per step
-= file size / steps.
+Overhead = node / record - 1 (issue 17's target: <= 15 %), in wall time and in CPU time of the
+whole process (the recorder compresses and writes on a worker thread; on 2 cores that thread
+competes with the chamber, so process CPU is the honest measure of what recording costs); also
+as microseconds of process CPU each layer adds to a step. Bytes per step = file size / steps.
 
 Usage (workspace sourced): python scripts/bench_recording.py [--challenge control]
        [--episodes 8] [--rounds 15] [--json out.json]
@@ -150,6 +150,9 @@ def main() -> int:
         'recording_overhead': round(wall['node'] / wall['record'] - 1.0, 4),
         'recording_overhead_process_cpu': round(cpu['node'] / cpu['record'] - 1.0, 4),
         'mcap_writer_overhead_process_cpu': round(cpu['node'] / cpu['mcap'] - 1.0, 4),
+        # What each layer adds per step, in us of process CPU: absolute, unlike the ratios.
+        'node_us_per_step': round(1e6 / cpu['node'] - 1e6 / cpu['sim'], 1),
+        'recording_us_per_step': round(1e6 / cpu['record'] - 1e6 / cpu['node'], 1),
         'bytes_per_step': round(size / steps, 1),
         'raw_image_bytes_per_step': cfg.resolution ** 2 * 3,
     }
@@ -157,7 +160,9 @@ def main() -> int:
     for k in VARIANTS:
         print(f'  {k:>6}: {wall[k]:8.1f} steps/s wall, {cpu[k]:8.1f} steps/s of process CPU')
     print(f'  recording overhead vs node: {result["recording_overhead"]:+.1%} wall, '
-          f'{result["recording_overhead_process_cpu"]:+.1%} process CPU (target <= +10%)')
+          f'{result["recording_overhead_process_cpu"]:+.1%} process CPU (target <= +15%)')
+    print(f'  per step: the node adds {result["node_us_per_step"]} us to the sim, recording '
+          f'{result["recording_us_per_step"]} us to the node (process CPU)')
     print(f'  mcap\'s own Writer instead: {result["mcap_writer_overhead_process_cpu"]:+.1%} '
           f'process CPU')
     print(f'  file: {result["bytes_per_step"]:.0f} B/step '

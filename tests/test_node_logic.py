@@ -289,6 +289,18 @@ def test_realtime_without_auto_reset_idles_after_the_episode() -> None:
     assert [m.step for m in transport.messages('step_result')] == [0, 1, 2]
 
 
+def test_realtime_commands_are_recorded_when_received_even_while_the_chamber_idles() -> None:
+    recorder = FakeRecorder()
+    transport, node = make(SimConfig(episode_length=2), recorder=recorder, mode='realtime',
+                           rate_hz=10.0, auto_reset=False)
+    transport.advance(1.0)  # the episode is over; ticks publish nothing more
+    calls = recorder.calls
+    sent = [transport.inject('light/command', command(0, action=a)) for a in (1, 2)]
+    assert recorder.calls == calls + 2 and [b[0][1] for b in recorder.batches[-2:]] == sent
+    transport.advance(1.0)
+    assert recorder.calls == calls + 2
+
+
 def test_propose_rejects_invalid_changes_and_applies_valid_ones_at_reset() -> None:
     transport, node = make()
     error = node.propose({'light_width': 2.0})
@@ -315,6 +327,7 @@ class FakeRecorder:
         self.channels: list[tuple[str, str, object]] = []
         self.writes: list[tuple[int, bytes, int, int]] = []
         self.calls = 0
+        self.batches: list[list[tuple[int, bytes, int, int]]] = []
         self.metadata: list[tuple[str, dict]] = []
         self.closed = 0
         self.error: str | None = None
@@ -326,6 +339,7 @@ class FakeRecorder:
     def write_many(self, messages: list[tuple[int, bytes, int, int]]) -> None:
         self.calls += 1
         self.writes += messages
+        self.batches.append(list(messages))
 
     def add_metadata(self, name: str, data: dict) -> None:
         assert all(isinstance(v, str) for v in data.values())
@@ -350,8 +364,10 @@ def test_recorder_gets_every_message_exact_bytes() -> None:
         assert recorded[name] == [cdr for _, cdr in published], name
     assert recorded['/chamber1/light/command'] == sent[:2]
     assert recorded['/chamber1/reset'] == sent[2:]
-    # One recorder call per tick and per received message; time order is handling order.
-    assert recorder.calls == 4 + 3  # ticks: start, 2 steps, reset; 3 received
+    # One recorder call per callback (start, 2 commands, reset): what was received, then
+    # what it caused; time order is handling order.
+    assert recorder.calls == 4
+    assert [batch[0][1] for batch in recorder.batches[1:]] == sent
     times = [log_ns for _, _, log_ns, _ in recorder.writes]
     assert times == sorted(times) and times[0] == node.params.period_ns
     assert [m[0] for m in recorder.metadata] == ['growspace']  # once, at start

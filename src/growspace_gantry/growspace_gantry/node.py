@@ -39,8 +39,7 @@ from growspace_sim import __version__, convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
-from growspace_sim.node.chamber_node import (
-    apply_command, EPISODE_OVER, Recorder, step_id_error)
+from growspace_sim.node.chamber_node import EPISODE_OVER, Recorder, step_id_error
 from growspace_sim.node.interface import (
     COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, STRING, Topic)
 from growspace_sim.node.transport import Transport
@@ -141,7 +140,7 @@ class GantryNode:
                 return
         before = self.sim.chamber.light.copy()
         try:
-            apply_command(self.sim, msg)
+            convert.apply_command(self.sim, msg)
             target = self.cal.to_machine(self.sim.chamber.light)
         except (CommandError, TargetError) as e:
             # Nothing is sent: the model light goes back to where the machine is going.

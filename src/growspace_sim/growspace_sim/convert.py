@@ -96,6 +96,13 @@ def light_msg(light: Light, step_id: int, stamp_ns: int, frame_id: str) -> Any:
         radius=light.radius, action=0, continuous=np.zeros(0, np.float32))
 
 
+def discrete_command_msg(action: int, step_id: int, stamp_ns: int, frame_id: str) -> Any:
+    """A ``growspace_msgs/LightCommand`` carrying one discrete action (lockstep clients)."""
+    return _cls(types.LIGHT_COMMAND)(
+        header=header(stamp_ns, frame_id), step_id=step_id, mode=MODE_DISCRETE, x=0.0, z=0.0,
+        width=0.0, radius=0.0, action=action, continuous=np.zeros(0, np.float32))
+
+
 def clock_msg(stamp_ns: int) -> Any:
     return _cls(CLOCK)(clock=stamp(stamp_ns))
 
@@ -114,7 +121,9 @@ def apply_command(sim: Any, msg: Any) -> None:
     if mode == MODE_DISCRETE:  # the light module checks actions and coordinates
         sim.apply_discrete(int(msg.action))
     elif mode == MODE_CONTINUOUS:
-        sim.apply_continuous(np.asarray(msg.continuous, np.float64))
+        # NaN/inf in the float32 action are rejected by the light; numpy's warning is noise.
+        with np.errstate(invalid='ignore', over='ignore'):
+            sim.apply_continuous(np.asarray(msg.continuous, np.float64))
     elif mode in (MODE_BEAM, MODE_SPOT):
         if (mode == MODE_SPOT) != spot:
             _reject('mode', mode, f'{MODE_SPOT if spot else MODE_BEAM} (this challenge has a '

@@ -141,9 +141,8 @@ class EpisodeRunner:
             ValueError: The node rejected the command without stepping (the message says why).
         """
         self._step_id += 1
-        self._send('light/command', types.new(
-            types.LIGHT_COMMAND, header=self._header(), step_id=self._step_id,
-            mode=convert.MODE_DISCRETE, action=int(action)))
+        self._send('light/command', convert.discrete_command_msg(
+            int(action), self._step_id, self._stamp_ns(), self._node.params.frame_id))
         outcome = self._node.outcome
         self.episode_return += outcome.reward
         return outcome
@@ -177,10 +176,12 @@ class EpisodeRunner:
 
     # ------------------------------------------------------------------ internals
     def _header(self) -> Any:
-        # Stamped when the node will receive it: half a period after its latest tick.
+        return convert.header(self._stamp_ns(), self._node.params.frame_id)
+
+    def _stamp_ns(self) -> int:
+        # A request is stamped when the node will receive it: half a period after its tick.
         node = self._node
-        return convert.header(node.sim_time_ns + node.params.period_ns // 2,
-                              node.params.frame_id)
+        return node.sim_time_ns + node.params.period_ns // 2
 
     def _send(self, topic: str, msg: Any) -> None:
         """Deliver a request to the node and take its answer (the StepResult it published)."""

@@ -63,13 +63,6 @@ def step_id_error(step_id: int, last_step_id: int, log: Any) -> str:
     return ''
 
 
-def apply_command(sim: Simulation, msg: Any) -> None:
-    """``convert.apply_command`` without numpy's warnings about NaN in a float32 action."""
-    # NaN/inf in a float32 action are rejected by apply_command; numpy's cast warning is noise.
-    with np.errstate(invalid='ignore', over='ignore'):
-        convert.apply_command(sim, msg)
-
-
 def _text(error: Exception) -> str:
     """How a rejected request is reported: a ValueError's own text names field and value."""
     return str(error) if isinstance(error, ValueError) else \
@@ -127,7 +120,7 @@ class ChamberNode:
         self.pending_cfg: SimConfig | None = None  # valid parameter changes, used at next reset
         self._latest: Any = None  # realtime: the command the next tick applies
         self._channels: dict[str, int] = {}
-        self._batch: list[tuple[int, bytes, int, int]] = []  # outputs of this tick, to record
+        self._batch: list[tuple[int, bytes, int, int]] = []  # this callback's messages, to record
         self._log_ns = 0  # recording time of what the node handles now (sim time) [ns]
         self._names = {key: transport.resolve(topic) for key, topic, _, _ in OUTPUTS}
         self._pubs = {key: transport.publisher(typename, topic, qos)
@@ -155,17 +148,23 @@ class ChamberNode:
         except Exception as e:  # noqa: BLE001 - keep the node alive, say why
             self.log.warn('command:internal', f'light/command: dropped, internal error '
                           f'{type(e).__name__}: {e}')
+        finally:
+            self._flush_records()
 
     def on_reset(self, msg: Any, cdr: bytes) -> None:
         """A ResetRequest arrived (transport callback)."""
         self._record_input('reset', cdr)
-        reset_id = int(msg.reset_id)
-        error = self.request_reset(msg, reset_id)
-        if error is not None:
-            key = error.field if isinstance(error, CommandError) else type(error).__name__
-            self.log.warn(f'reset:{key}', f'reset: rejected reset_id {reset_id}: '
-                          f'{_text(error).rstrip(".")}; the episode goes on unchanged.')
-            self._publish_result(step_id=0, reset_id=reset_id, info=f'error: {_text(error)}')
+        try:
+            reset_id = int(msg.reset_id)
+            error = self.request_reset(msg, reset_id)
+            if error is not None:
+                key = error.field if isinstance(error, CommandError) else type(error).__name__
+                self.log.warn(f'reset:{key}', f'reset: rejected reset_id {reset_id}: '
+                              f'{_text(error).rstrip(".")}; the episode goes on unchanged.')
+                self._publish_result(step_id=0, reset_id=reset_id,
+                                     info=f'error: {_text(error)}')
+        finally:
+            self._flush_records()
 
     def on_reset_service(self, request: Any) -> Any:
         """The ``reset`` service (rclpy mode): same as the topic, the node picks the id."""
@@ -249,7 +248,7 @@ class ChamberNode:
         """Apply a LightCommand; if it is bad, warn (throttled per field) and return the error
         text for the StepResult, else ''."""
         try:
-            apply_command(self.sim, msg)
+            convert.apply_command(self.sim, msg)
         except CommandError as e:
             self.log.warn(f'command:{e.field}', f'light/command: {consequence}: {e}')
             return f'error: {e}'
@@ -340,15 +339,13 @@ class ChamberNode:
         self._publish('result', convert.step_result_msg(
             outcome, step_id=step_id, reset_id=reset_id, step=self.sim.chamber.steps,
             stamp_ns=self.sim_time_ns, frame_id=self.params.frame_id, info=info))
-        if self._batch:
-            batch, self._batch = self._batch, []
-            self._write(batch)
+        self._flush_records()
 
     def _publish(self, key: str, msg: Any) -> None:
         cdr = self._pubs[key](msg)
         channel = self._channels.get(key)
         if channel is not None:
-            # One recorder call per tick (in _publish_result): half the recording cost is the
+            # One recorder call per tick (_flush_records): half the recording cost was the
             # per-call locking and bookkeeping, not the bytes.
             self._batch.append((channel, cdr, self._log_ns, self._log_ns))
 
@@ -378,11 +375,15 @@ class ChamberNode:
             # Half a period before the tick it causes; an answer without a step (a rejected
             # command or reset) is recorded at the same time, right after it.
             self._log_ns = self.sim_time_ns + self.params.period_ns // 2
-            self._write([(channel, cdr, self._log_ns, self._log_ns)])
+            self._batch.append((channel, cdr, self._log_ns, self._log_ns))
 
-    def _write(self, messages: list[tuple[int, bytes, int, int]]) -> None:
+    def _flush_records(self) -> None:
+        """Hand this callback's messages to the recorder in one call (input, then outputs)."""
+        if not self._batch:
+            return
+        batch, self._batch = self._batch, []
         try:
-            self.recorder.write_many(messages)
+            self.recorder.write_many(batch)
         except Exception as e:  # noqa: BLE001 - a full disk must not stop the chamber
             self._recording_failed(e)
 

@@ -9,6 +9,7 @@ recorder, which has no rclpy, writes the same metadata as a live node.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, Sequence
 
 import yaml
@@ -95,8 +96,12 @@ def offered_qos_yaml(profiles: QosProfile | Sequence[QosProfile]) -> str:
     Returns:
         A YAML list as a string, in rosbag2's block style.
     """
-    if isinstance(profiles, QosProfile):
-        profiles = [profiles]
+    return _offered_qos_yaml((profiles,) if isinstance(profiles, QosProfile) else tuple(profiles))
+
+
+@functools.lru_cache(maxsize=64)
+def _offered_qos_yaml(profiles: tuple[QosProfile, ...]) -> str:
+    # Cached: PyYAML takes ~0.3 ms a profile, and every recording registers 8 channels.
     entries: list[dict[str, Any]] = [{
         'history': p.history,
         'depth': p.depth if p.history == 'keep_last' else 0,
