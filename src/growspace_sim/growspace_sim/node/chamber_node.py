@@ -345,8 +345,8 @@ class ChamberNode:
         cdr = self._pubs[key](msg)
         channel = self._channels.get(key)
         if channel is not None:
-            # One recorder call per tick (_flush_records): half the recording cost was the
-            # per-call locking and bookkeeping, not the bytes.
+            # One recorder call per callback (_flush_records, after its answer's last message):
+            # half the recording cost was once the per-call locking and bookkeeping.
             self._batch.append((channel, cdr, self._log_ns, self._log_ns))
 
     # --- recording -----------------------------------------------------------------------
