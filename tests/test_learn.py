@@ -136,6 +136,52 @@ def test_training_through_the_ros_bridge(tmp_path):
     assert losses and all(math.isfinite(v) for v in losses)
 
 
+@pytest.mark.parametrize('env_id', [ENV, 'GrowSpace/Shape-Hard-v0'])
+def test_native_vec_env_gives_sb3_the_steps_dummy_vec_env_gives(env_id):
+    from stable_baselines3.common.env_util import make_vec_env
+
+    dummy = make_vec_env(env_id, n_envs=3, seed=7)
+    native = train.make_env(env_id, 3, 7, vec='native')
+    np.testing.assert_array_equal(native.reset(), dummy.reset())
+    actions = np.random.default_rng(0).integers(0, native.action_space.n, (110, 3))
+    ended = 0
+    for step, action in enumerate(actions):  # two episode ends of 50 steps each
+        obs, rewards, dones, infos = native.step(action)
+        want_obs, want_rewards, want_dones, want_infos = dummy.step(action)
+        np.testing.assert_array_equal(obs, want_obs, err_msg=f'step {step}')
+        np.testing.assert_array_equal(rewards, want_rewards)
+        assert rewards.dtype == want_rewards.dtype and dones.dtype == want_dones.dtype
+        np.testing.assert_array_equal(dones, want_dones)
+        for info, want in zip(infos, want_infos):
+            assert set(info) == set(want) - {'tips'}
+            for key in set(info) - {'episode'}:
+                np.testing.assert_equal(info[key], want[key], err_msg=f'{key} at step {step}')
+            if 'episode' in want:
+                assert info['episode']['l'] == want['episode']['l'] == 50
+                # VecMonitor sums the float32 rewards, Monitor the float64 ones.
+                assert info['episode']['r'] == pytest.approx(want['episode']['r'], rel=1e-5)
+                ended += 1
+    assert ended == 6
+    assert native.get_attr('render_mode') == [None] * 3
+    native.close()
+    dummy.close()
+
+
+def test_ppo_trains_on_the_native_vec_env_and_bad_choices_are_refused(tmp_path):
+    run = train.train('ppo', ENV, 256, seed=0, out=tmp_path / 'native', n_envs=4, device='cpu',
+                      hp=SMOKE_HP['ppo'], progress_bar=False, log_interval=1, vec='native')
+    with open(run / 'episodes.csv', newline='') as f:
+        episodes = list(csv.DictReader(f))
+    assert len(episodes) == 4 and all(int(e['length']) == 50 for e in episodes)
+    assert json.loads((run / 'run.json').read_text())['vec'] == 'native'
+    with pytest.raises(ValueError, match='bridge'):
+        train.make_env(ENV, 2, 0, vec='native', bridge=True)
+    with pytest.raises(ValueError, match="vec must be one of .* got 'fast'"):
+        train.make_env(ENV, 2, 0, vec='fast')
+    with pytest.raises(SystemExit):
+        train.main(['--vec', 'native', '--bridge', '--steps', '10'])
+
+
 @pytest.mark.slow
 def test_ppo_learns_control_hard(tmp_path):
     """About 3 minutes on one core: PPO (case-study settings) beats random on control hard."""

@@ -1,8 +1,10 @@
 """Train PPO, A2C, DQN or Rainbow with a CNN encoder on a GrowSpace env (``growspace-train``).
 
 Stable-Baselines3 on vectorised envs (``DummyVecEnv`` by default: on a few cores the env is
-cheaper than the process hop of ``SubprocVecEnv``). PPO defaults are the paper's final
-hyperparameters (appendix "Hyperparameter Search"). A run directory holds::
+cheaper than the process hop of ``SubprocVecEnv``; ``--vec native`` steps every env in one
+``GrowSpaceVectorEnv`` through ``learn.native_vec.NativeVecEnv``, the same episodes for less).
+PPO defaults are the paper's final hyperparameters (appendix "Hyperparameter Search").
+A run directory holds::
 
     run.json          arguments, hyperparameters, versions, wall time, steps/s
     episodes.csv      one row per finished training episode: timestep, wall_s, env, return, length
@@ -38,13 +40,15 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecMonitor
 
 import growspace_sim  # noqa: F401  (registers the ids, also in subprocess workers)
+from growspace_sim.learn.native_vec import NativeVecEnv
 from growspace_sim.learn.networks import GrowSpaceCNN
 from growspace_sim.learn.rainbow import Rainbow
 
 ALGOS: dict[str, type[BaseAlgorithm]] = {'ppo': PPO, 'a2c': A2C, 'dqn': DQN, 'rainbow': Rainbow}
+VEC_KINDS = ('dummy', 'subproc', 'native')
 
 # The paper's final PPO hyperparameters (appendix table). "Number of steps" is the rollout
 # length per env and "mini batch" the minibatch size; the table's Adam epsilon (0.25) and
@@ -135,8 +139,22 @@ def make_env(env_id: str, n_envs: int, seed: int, env_kwargs: dict | None = None
              vec: str = 'dummy', bridge: bool = False) -> VecEnv:
     """``n_envs`` copies of ``env_id`` with ``Monitor`` (episode returns), seeds seed..seed+n-1.
 
-    With ``bridge``, each copy is the ROS Gymnasium bridge env driving its own sim node.
+    ``vec``: ``dummy`` (one process), ``subproc`` (a process per env) or ``native`` (one
+    ``GrowSpaceVectorEnv`` for all, with ``VecMonitor``). With ``bridge``, each copy is the
+    ROS Gymnasium bridge env driving its own sim node.
+
+    Raises:
+        ValueError: an unknown ``vec``, or ``native`` with ``bridge``.
     """
+    if vec not in VEC_KINDS:
+        raise ValueError(f'vec must be one of {VEC_KINDS}, got {vec!r}.')
+    if vec == 'native':
+        if bridge:
+            raise ValueError("vec='native' steps the chambers in process; the bridge needs "
+                             "vec='dummy' or 'subproc'.")
+        env = NativeVecEnv(env_id, n_envs, **(env_kwargs or {}))
+        env.seed(seed)  # chamber i starts from seed + i, as make_vec_env seeds env i
+        return VecMonitor(env)
     if bridge:
         env_id = bridge_env_id(env_id)
     vec_cls = SubprocVecEnv if vec == 'subproc' else DummyVecEnv
@@ -236,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--out', help='run directory (default runs/<algo>-<env>-s<seed>)')
     parser.add_argument('--n-envs', type=int, help='vectorised envs (default: 2 on-policy, 1 DQN)')
-    parser.add_argument('--vec', choices=('dummy', 'subproc'), default='dummy')
+    parser.add_argument('--vec', choices=VEC_KINDS, default='dummy',
+                        help='native: all envs in one GrowSpaceVectorEnv (not with --bridge)')
     parser.add_argument('--device', default='auto', help='cpu, cuda or auto')
     parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')
     parser.add_argument('--hp', action='append', default=[], metavar='KEY=VALUE',
@@ -252,6 +271,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.env.startswith('GrowSpaceROS/'):
         args.bridge = True
+    if args.vec == 'native' and args.bridge:
+        parser.error('--vec native steps the chambers in process; with --bridge use dummy or '
+                     'subproc')
     if args.env not in gym.registry and not args.bridge:
         parser.error(f'unknown env id {args.env!r}')
     if args.steps < 1:
