@@ -134,21 +134,53 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     assert 3 <= len(finished) < n, 'the sweep was not killed mid-way'
     assert all(len(runs) == 1 for runs in finished.values())
     # One trial at a time: a trial starts only after Tune saved the previous one as finished,
-    # so every finished trial but the newest one is on record.
+    # so every finished trial but the newest one is on record, unless the kill cut Tune's
+    # state file short (Tune writes it at every step here): then every trial runs again.
     newest = max(finished, key=lambda k: finished[k][0]['started'])
     on_record = {k: v for k, v in finished.items() if k != newest}
+    state = max((out / 'tune').glob('experiment_state-*.json'))
+    try:
+        json.loads(state.read_text())
+    except ValueError:
+        on_record = {}
 
     assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
                        '--no-plots']) == 0
 
     after = _finished(out)
     assert len(after) == n
+    if not on_record:  # the unreadable run was set aside whole
+        assert len(list(tmp_path.glob('out/tune-unreadable-*'))) == 1
     for key, runs in on_record.items():  # still the one execution of the first sweep
         assert after[key] == runs, f'{key} ran again'
     for key in after.keys() - finished.keys():  # run by the second sweep, not a leftover
         assert [datetime.fromisoformat(r['started']).timestamp() > killed
                 for r in after[key]] == [True], key
     assert {t['status'] for t in _read_csv(out / 'trials.csv')} == {'ok'}
+
+
+def test_a_tune_state_cut_short_is_set_aside_and_every_trial_runs_again(
+        tmp_path, local_ray, capsys):
+    spec = _write_spec(tmp_path / 'cut.yaml', [
+        {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': 2}])
+    out = tmp_path / 'out'
+    args = [str(spec), '--out', str(out), '--workers', '2', '--quiet', '--no-plots']
+    assert sweep.main(args) == 0
+    first = _read_csv(out / 'trials.csv')
+    state = max((out / 'tune').glob('experiment_state-*.json'))
+    state.write_bytes(state.read_bytes()[:len(state.read_bytes()) // 2])  # a kill mid-write
+    capsys.readouterr()
+
+    assert sweep.main(args) == 0
+
+    err = capsys.readouterr().err
+    assert f'{state} is cut short' in err and 'All 2 trials run again' in err
+    aside = list(tmp_path.glob('out/tune-unreadable-*'))
+    assert len(aside) == 1 and (aside[0] / state.name).exists()
+    assert all(len(runs) == 1 for runs in _finished(out).values()) and len(_finished(out)) == 2
+    again = _read_csv(out / 'trials.csv')
+    assert [(r['key'], r['status'], r['mean'], r['se']) for r in again] == \
+        [(r['key'], r['status'], r['mean'], r['se']) for r in first]
 
 
 def _finished(out: Path) -> dict[str, list[dict]]:

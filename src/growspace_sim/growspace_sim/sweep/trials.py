@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import socket
+import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -199,6 +200,8 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
         {'cpu': cpus_per_trial, 'gpu': gpus_per_trial})
     # Given again on restore: Tune creates the trials it had not created yet from it.
     param_space = {'trial': tune.grid_search(list(by_key))}
+    if tune.Tuner.can_restore(path) and '://' not in path:
+        _set_aside_if_unreadable(Path(path), len(by_key))
     if tune.Tuner.can_restore(path):
         tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored,
                                    param_space=param_space)
@@ -224,6 +227,30 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
             summary = json.loads((files / 'trial.json').read_text())
             outcomes[trial.key] = Outcome(trial, files=files, summary=summary)
     return [outcomes[t.key] for t in spec.trials if t.key in outcomes]
+
+
+def _set_aside_if_unreadable(path: Path, trials: int) -> None:
+    """Rename a local Tune experiment whose newest state file was cut short, and say so.
+
+    Tune rewrites ``experiment_state-<session>.json`` in place, so a kill during a write leaves
+    a file that Tune cannot restore (one kill in seven in tests/test_sweep.py, which has Tune
+    write it at every step); Tune then logs a traceback and quietly runs every trial again.
+    Starting over is the only way from such a file (it is what says which trials finished), so
+    do it in the open and keep the old run's files.
+    """
+    states = sorted(path.glob('experiment_state-*.json'))  # named by session start time
+    if not states:
+        return
+    try:
+        json.loads(states[-1].read_text())
+        return
+    except ValueError:
+        pass
+    aside = path.with_name(f'{path.name}-unreadable-{time.strftime("%Y%m%d-%H%M%S")}')
+    path.rename(aside)
+    print(f'{states[-1]} is cut short: the sweep was killed while Ray Tune wrote it, so Tune '
+          f'cannot tell which trials finished. All {trials} trials run again (each is seeded: '
+          f'the same results); the old run is kept in {aside}.', file=sys.stderr)
 
 
 def _trial_key(trial: Any) -> str:
