@@ -90,17 +90,22 @@ def step_result_msg(outcome: StepOutcome, *, step_id: int, reset_id: int, step: 
 
 def light_msg(light: Light, step_id: int, stamp_ns: int, frame_id: str) -> Any:
     """The applied light as an absolute ``growspace_msgs/LightCommand`` (beam or spot mode)."""
-    return _cls(types.LIGHT_COMMAND)(
-        header=header(stamp_ns, frame_id), step_id=step_id,
-        mode=MODE_SPOT if light.spot else MODE_BEAM, x=light.x, z=light.z, width=light.width,
-        radius=light.radius, action=0, continuous=np.zeros(0, np.float32))
+    return _light_command(stamp_ns, frame_id, step_id, MODE_SPOT if light.spot else MODE_BEAM,
+                          x=light.x, z=light.z, width=light.width, radius=light.radius)
 
 
 def discrete_command_msg(action: int, step_id: int, stamp_ns: int, frame_id: str) -> Any:
     """A ``growspace_msgs/LightCommand`` carrying one discrete action (lockstep clients)."""
+    return _light_command(stamp_ns, frame_id, step_id, MODE_DISCRETE, action=action)
+
+
+def _light_command(stamp_ns: int, frame_id: str, step_id: int, mode: int, *, x: float = 0.0,
+                   z: float = 0.0, width: float = 0.0, radius: float = 0.0,
+                   action: int = 0) -> Any:
+    # The class directly, every field given: types.new's generic defaults cost ~4 us a message.
     return _cls(types.LIGHT_COMMAND)(
-        header=header(stamp_ns, frame_id), step_id=step_id, mode=MODE_DISCRETE, x=0.0, z=0.0,
-        width=0.0, radius=0.0, action=action, continuous=np.zeros(0, np.float32))
+        header=header(stamp_ns, frame_id), step_id=step_id, mode=mode, x=x, z=z, width=width,
+        radius=radius, action=action, continuous=np.zeros(0, np.float32))
 
 
 def clock_msg(stamp_ns: int) -> Any:

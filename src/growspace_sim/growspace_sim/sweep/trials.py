@@ -200,7 +200,7 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
         {'cpu': cpus_per_trial, 'gpu': gpus_per_trial})
     # Given again on restore: Tune creates the trials it had not created yet from it.
     param_space = {'trial': tune.grid_search(list(by_key))}
-    if tune.Tuner.can_restore(path) and '://' not in path:
+    if '://' not in path:  # a local experiment: Tune may have left its state cut short
         _set_aside_if_unreadable(Path(path), len(by_key))
     if tune.Tuner.can_restore(path):
         tuner = tune.Tuner.restore(path, trainable, restart_errored=retry_errored,
