@@ -96,13 +96,14 @@ cmd=${1:-help}
 case "$cmd" in
   build) setup "${MAIN[@]}" ;;
   demo) setup "${MAIN[@]}"
-        sandboxed .venv/bin/python -m growspace_sim.demo "$@" ;;
+        sandboxed .venv/bin/python -m growspace_sim.tools.demo "$@" ;;
   test) setup "${MAIN[@]}"
+        .venv/bin/ruff check --quiet . || { echo "ruff: lint failed (ruff.toml)" >&2; exit 1; }
         sandboxed .venv/bin/python -m pytest -q tests "$@" ;;
   bench) setup "${MAIN[@]}"
-         sandboxed .venv/bin/python -m growspace_sim.bench "$@" ;;
+         sandboxed .venv/bin/python -m growspace_sim.tools.bench "$@" ;;
   eval) setup "${MAIN[@]}"
-        exec .venv/bin/python -m growspace_sim.evaluate "$@" ;;
+        exec .venv/bin/python -m growspace_sim.agents.evaluate "$@" ;;
   sweep) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)

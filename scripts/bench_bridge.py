@@ -16,10 +16,11 @@ Usage (workspace sourced, e.g. through ``./run.sh``'s environment):
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 import os
 import random
 import time
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -30,7 +30,7 @@ from growspace_gantry.link import SerialLink  # noqa: E402
 from growspace_gantry.main import default_calibration  # noqa: E402
 from growspace_gantry.node import GantryNode  # noqa: E402
 from growspace_gantry.settings import GantryParams  # noqa: E402
-from growspace_sim import convert  # noqa: E402
+from growspace_sim.ros import convert  # noqa: E402
 from growspace_sim.core.config import SimConfig  # noqa: E402
 from growspace_sim.node.fake import FakeTransport  # noqa: E402
 from growspace_sim.ros import types  # noqa: E402
@@ -65,7 +65,7 @@ def episode(speedup: float, seed: int) -> tuple[float, float, float]:
             t.inject('light/command', types.new(types.LIGHT_COMMAND, step_id=step_id,
                                                 mode=convert.MODE_DISCRETE,
                                                 action=int(rng.integers(5))))
-            until(lambda: len(t.messages('step_result')) > n)
+            until(lambda n=n: len(t.messages('step_result')) > n)
             assert t.messages('step_result')[-1].info == '', t.messages('step_result')[-1]
         per_cmd = (time.thread_time() - cpu) / STEPS
         per_wall = (time.perf_counter() - wall) / STEPS

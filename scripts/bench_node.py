@@ -53,8 +53,8 @@ class Client:
     """Lockstep client: waits for the StepResult and the Image of every request."""
 
     def __init__(self) -> None:
-        from growspace_sim import convert
-        from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS
+        from growspace_sim.ros import convert
+        from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
         from growspace_sim.node.rclpy_transport import RclpyTransport
         from growspace_sim.ros import types
 

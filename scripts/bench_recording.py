@@ -32,7 +32,7 @@ import numpy as np
 
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import CHUNK_SIZE, McapRecorder, PROFILE
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation

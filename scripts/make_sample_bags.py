@@ -14,10 +14,10 @@ from pathlib import Path
 import sys
 
 from growspace_sim import replay
-from growspace_sim.agents import OracleAgent
+from growspace_sim.agents.reference import OracleAgent
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 
 SEED = 2024  # one fixed seed for every sample

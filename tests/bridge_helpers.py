@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import os
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 

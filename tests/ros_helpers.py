@@ -6,11 +6,12 @@ user's node would, so these tests check our node against rclpy itself, not again
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import signal
 import subprocess
 import tempfile
 import time
-from typing import Any, Callable
+from typing import Any
 
 import rclpy
 from rclpy.context import Context

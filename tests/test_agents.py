@@ -9,9 +9,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from growspace_sim import bench, evaluate
-from growspace_sim.agents import OracleAgent, RandomAgent, run_episode
-from growspace_sim.registration import env_id
+from growspace_sim.tools import bench
+
+from growspace_sim.agents import evaluate
+from growspace_sim.agents.reference import OracleAgent, RandomAgent, run_episode
+from growspace_sim.envs.registration import env_id
 
 
 def test_random_agent_is_seeded():

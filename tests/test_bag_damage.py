@@ -19,9 +19,9 @@ from mcap.stream_reader import breakup_chunk, StreamReader
 import pytest
 
 from growspace_sim import recording
-from growspace_sim.agents import OracleAgent
+from growspace_sim.agents.reference import OracleAgent
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay import Bag, export_episode, main, read_episodes, ReplayError, resimulate
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import pickle
 import secrets
-from typing import Iterator
 
 import gymnasium as gym
 from gymnasium.utils.env_checker import check_env
@@ -15,7 +15,7 @@ from bridge_helpers import assert_same_transition, loopback_domain
 import growspace_gym_bridge  # noqa: F401 - registers the GrowSpaceROS ids
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_gym_bridge.process import NodeProcess
-from growspace_sim.envs import GrowSpaceEnv
+from growspace_sim.envs.env import GrowSpaceEnv
 
 NAMESPACE = f'/gs_bridge_test_{secrets.token_hex(3)}'
 EPISODE = 50

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import os
 import signal
 import time
-from typing import Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -15,7 +15,7 @@ from bridge_helpers import assert_same_transition, loopback_domain
 import growspace_gym_bridge  # noqa: F401 - registers the GrowSpaceROS ids
 from growspace_gym_bridge import BridgeTimeout, NodeDied
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
-from growspace_sim.envs import GrowSpaceEnv
+from growspace_sim.envs.env import GrowSpaceEnv
 
 BRIDGED = 'GrowSpaceROS/Control-Easy-v0'
 LOCAL = 'GrowSpace/Control-Easy-v0'
@@ -110,8 +110,8 @@ def test_vector_env_of_two_bridged_envs(mode: str) -> None:
         namespaces = vec.get_attr('namespace')
         assert len(set(namespaces)) == 2  # one node and namespace per sub-env
         bridged, in_process = _rollout(vec, 12), _rollout(local, 12)
-        for i, (b, l) in enumerate(zip(bridged, in_process)):
-            assert_same_transition(b, l, f'{mode} vector call {i}')
+        for i, (b, ref) in enumerate(zip(bridged, in_process)):
+            assert_same_transition(b, ref, f'{mode} vector call {i}')
         if mode == 'async':  # both workers wait for their nodes at the same time
             vec.step_async(np.array([0, 1]))
             assert_same_transition(vec.step_wait(), local.step(np.array([0, 1])), 'async')

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from growspace_sim.agents import OracleAgent
+from growspace_sim.agents.reference import OracleAgent
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay import Bag, compare, main
 from growspace_sim.ros import types

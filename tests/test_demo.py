@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from growspace_sim import demo, replay
+from growspace_sim import replay
 
+
+from growspace_sim.tools import demo
 from bridge_helpers import loopback_domain
 
 domain = pytest.fixture(scope='module')(loopback_domain)

@@ -13,8 +13,8 @@ from gymnasium.utils.env_checker import check_env
 
 import growspace_sim
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs import DigitCurriculum, GrowSpaceEnv
-from growspace_sim.registration import env_id, register_envs
+from growspace_sim.envs.env import DigitCurriculum, GrowSpaceEnv
+from growspace_sim.envs.registration import env_id, register_envs
 from growspace_sim.render import LIGHT, PLANT, TARGET
 from growspace_sim.simulation import Simulation
 
@@ -162,7 +162,7 @@ def test_curriculum_adds_digits_in_the_papers_order():
 
 
 @pytest.mark.parametrize('kwargs, message', [
-    ({'observation': 'pixels'}, "observation must be one of"),
+    ({'observation': 'pixels'}, 'observation must be one of'),
     ({'render_mode': 'human'}, "render_mode must be None or 'rgb_array'"),
     ({'branch_length': 2.0}, 'branch_length must be in'),
     ({'challenge': 'fly'}, 'challenge must be one of'),

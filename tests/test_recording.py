@@ -28,10 +28,10 @@ from rosbags.highlevel import AnyReader
 import zstandard
 
 from growspace_sim import recording
-from growspace_sim.agents import OracleAgent
+from growspace_sim.agents.reference import OracleAgent
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
-from growspace_sim.node.interface import TOPICS
+from growspace_sim.node.episode_runner import EpisodeRunner
+from growspace_sim.ros.interface import TOPICS
 from growspace_sim.recording import McapRecorder, RecordingError
 from growspace_sim.recording.chunk_writer import record_bytes
 from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
@@ -211,7 +211,7 @@ def test_close_is_idempotent_and_later_writes_fail(tmp_path):
 
 
 def _cli(*args: str) -> list[str]:
-    return [sys.executable, '-m', 'growspace_sim.recorder_cli', *args]
+    return [sys.executable, '-m', 'growspace_sim.tools.record', *args]
 
 
 def _env() -> dict[str, str]:
@@ -267,20 +267,20 @@ def test_sigkill_leaves_complete_chunks_recoverable(tmp_path):
 def test_disk_full_mid_run_keeps_the_chamber_running(tmp_path):
     # RLIMIT_FSIZE makes writes past 120 kB fail (EFBIG) as a full disk would (ENOSPC).
     path = tmp_path / 'full.mcap'
-    script = textwrap.dedent(f'''
+    script = textwrap.dedent(f"""
         import resource, signal
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, 120_000))
-        from growspace_sim.agents import OracleAgent
+        from growspace_sim.agents.reference import OracleAgent
         from growspace_sim.core.config import SimConfig
-        from growspace_sim.episode_runner import EpisodeRunner
+        from growspace_sim.node.episode_runner import EpisodeRunner
         from growspace_sim.recording import McapRecorder
         rec = McapRecorder({str(path)!r}, chunk_size=16_384)
         runner = EpisodeRunner(SimConfig(), rec)
         steps = sum(runner.run_episode(OracleAgent().act, seed)[1] for seed in range(8))
         rec.close()
         print(steps, runner.recording_error)
-    ''')
+    """)
     out = subprocess.run([sys.executable, '-c', script], env=_env(), capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from growspace_sim import recording, replay
-from growspace_sim.agents import OracleAgent
+from growspace_sim.agents.reference import OracleAgent
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay import Bag, ReplayError
 from growspace_sim.ros import qos as ros_qos, types

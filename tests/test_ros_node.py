@@ -8,12 +8,13 @@ loopback-only network namespace (``unshare -n``), as ``./run.sh test`` does.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import os
 import secrets
 import signal
 import subprocess
 import time
-from typing import Any, Iterator
+from typing import Any
 
 import gymnasium
 import numpy as np
@@ -26,10 +27,11 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
                                 SetParameters)
 from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
-import growspace_sim.registration  # noqa: F401 - registers the GrowSpace ids
+import growspace_sim.envs.registration  # noqa: F401 - registers the GrowSpace ids
 from growspace_sim.core import task as tasks
 
-from growspace_sim.node import interface, params
+from growspace_sim.node import params
+from growspace_sim.ros import interface
 from growspace_sim.ros import types
 
 NAMESPACE = f'/gs_node_{secrets.token_hex(3)}'
@@ -190,9 +192,10 @@ def test_every_step_answered_exactly_once_across_resets(fresh: Client) -> None:
             fresh.command.publish(LightCommand(step_id=i, mode=LightCommand.MODE_DISCRETE,
                                                action=i % 3))
             if i > window:
-                fresh.wait_result(lambda m, j=i - window: m.reset_id == reset_id
+                fresh.wait_result(lambda m, j=i - window, r=reset_id: m.reset_id == r
                                   and m.step_id == j)
-        fresh.wait_result(lambda m: m.reset_id == reset_id and m.step_id == ids[-1])
+        fresh.wait_result(lambda m, r=reset_id, last=ids[-1]: m.reset_id == r
+                          and m.step_id == last)
         fresh.drain(0.2)  # a duplicate answer would arrive now
         mine = [r for r in fresh.results if r.reset_id == reset_id and r.step_id > 0]
         counts = {i: sum(r.step_id == i for r in mine) for i in ids}
@@ -245,7 +248,7 @@ def test_same_seed_gives_same_episode_other_seed_differs(fresh: Client) -> None:
 
 @pytest.mark.parametrize('challenge', tasks.names())
 def test_episode_over_ros_is_bit_identical_to_in_process(fresh: Client, challenge: str) -> None:
-    env = gymnasium.make(growspace_sim.registration.env_id(challenge, 'easy'),
+    env = gymnasium.make(growspace_sim.envs.registration.env_id(challenge, 'easy'),
                          episode_length=EPISODE)
     seed, reset_id = 11, 300 + tasks.names().index(challenge)
     try:

@@ -13,14 +13,14 @@ import time
 
 import pytest
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.chamber_node import ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
 from growspace_sim.ros import types
-from growspace_sim.teleop import QUIT, RESET, Teleop, key_to_command
+from growspace_sim.tools.teleop import QUIT, RESET, Teleop, key_to_command
 from ros_helpers import Client, NodeProcess
 
 
@@ -110,7 +110,7 @@ def test_teleop_in_a_terminal_drives_the_node() -> None:
     pid, fd = pty.fork()
     if pid == 0:  # the child: teleop on a pseudo terminal
         os.environ['TERM'] = 'xterm'
-        os.execv(sys.executable, [sys.executable, '-m', 'growspace_sim.teleop', '--ros-args',
+        os.execv(sys.executable, [sys.executable, '-m', 'growspace_sim.tools.teleop', '--ros-args',
                                   '-r', f'__ns:={namespace}'])
     try:
         observer = Client(namespace, 'observer')

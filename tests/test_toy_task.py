@@ -11,15 +11,15 @@ from gymnasium.utils.env_checker import check_env
 import numpy as np
 import pytest
 
-from growspace_sim.agents import OracleAgent, run_episode
+from growspace_sim.agents.reference import OracleAgent, run_episode
 from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS
 from growspace_sim.core.state import ChamberState
 from growspace_sim.core.task import Layout, Score, Task
-from growspace_sim.episode_runner import EpisodeRunner
-from growspace_sim.registration import env_id, register_envs
+from growspace_sim.node.episode_runner import EpisodeRunner
+from growspace_sim.envs.registration import env_id, register_envs
 
 
 def tall_layout(cfg: SimConfig, rng: np.random.Generator) -> Layout:

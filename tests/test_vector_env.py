@@ -10,9 +10,9 @@ import pytest
 
 from growspace_sim import digits
 from growspace_sim.core.errors import CommandError
-from growspace_sim.envs import GrowSpaceEnv
-from growspace_sim.registration import register_envs
-from growspace_sim.vector_env import GrowSpaceVectorEnv
+from growspace_sim.envs.env import GrowSpaceEnv
+from growspace_sim.envs.registration import register_envs
+from growspace_sim.envs.vector import GrowSpaceVectorEnv
 
 ALL_IDS = register_envs()
 SHARED_INFO = ('step', 'success', 'plant_rewards', 'branch_counts', 'light', 'digit')
@@ -28,7 +28,7 @@ def _assert_same_info(native: dict, sync: dict) -> None:
 
 def test_every_env_id_has_the_native_vector_env():
     for name in ALL_IDS:
-        assert gym.spec(name).vector_entry_point.startswith('growspace_sim.vector_env:'), name
+        assert gym.spec(name).vector_entry_point.startswith('growspace_sim.envs.vector:'), name
     envs = gym.make_vec('GrowSpace/FairnessContinuous-Hard-v0', num_envs=3,
                         vectorization_mode='vector_entry_point')
     assert isinstance(envs, GrowSpaceVectorEnv)

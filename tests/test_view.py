@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation

@@ -8,19 +8,20 @@ namespace, as ``./run.sh test`` does.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import json
 import os
 import secrets
 import socket
 import struct
 import time
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.node.interface import STRING
+from growspace_sim.ros.interface import STRING
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 from growspace_sim.view import markers
@@ -163,7 +164,7 @@ def test_view_node_shows_a_replayed_bag_with_its_photons() -> None:
     (('-p', 'view_size:=8'), 'view_size = 8 must be in [16, 4096] px'),
     (('-p', 'foxglove_port:=70000'), 'foxglove_port = 70000 must be in [0, 65535]'),
     (('-p', 'foxglove_port:=8765', '-p', 'foxglove_address:=not an address'),
-     "cannot start the Foxglove server on not an address:8765"),
+     'cannot start the Foxglove server on not an address:8765'),
 ])
 def test_view_node_bad_parameters_exit_2_naming_them(args: tuple, expected: str) -> None:
     from ros_helpers import NodeProcess, TIMEOUT_S

@@ -15,10 +15,11 @@ Loading validates every key and names the key, the value and what is allowed.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 
@@ -128,7 +129,7 @@ class Calibration:
 
         def need(number: int) -> float | None:
             if number not in settings:
-                problems.append(f'${number} is missing from the controller\'s $$ report')
+                problems.append(f"${number} is missing from the controller's $$ report")
                 return None
             return settings[number]
         if need(32) not in (None, 1.0):
@@ -152,7 +153,7 @@ class Calibration:
                                 f'mm is longer than ${130 + i} = {travel:g} mm')
             if soft and not (-travel <= axis.min_mm and axis.max_mm <= 0.0):
                 problems.append(f'calibration {role}: [{axis.min_mm:g}, {axis.max_mm:g}] mm is '
-                                f'outside GRBL\'s soft-limit space [-{travel:g}, 0] mm '
+                                f"outside GRBL's soft-limit space [-{travel:g}, 0] mm "
                                 f'(${130 + i}, $20=1)')
         return problems
 

@@ -18,8 +18,8 @@ node calls it from a timer. The rules a machine builder expects, all here:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable, Mapping
 
 from growspace_gantry import grbl
 from growspace_gantry.calibration import Calibration
@@ -266,7 +266,7 @@ class GrblController:
         problems = self.cal.check_settings(self.settings)
         if problems:
             self.fault = '; '.join(problems)
-            self.log.warn('grbl:settings', f'gantry: the controller\'s settings do not match '
+            self.log.warn('grbl:settings', f"gantry: the controller's settings do not match "
                           f'the calibration, nothing will move: {self.fault}')
             self.link.close()
             self.link = None

@@ -10,8 +10,8 @@ refuse it too.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
 import sys
-from typing import Iterator
 
 from growspace_gantry import calibration, grbl
 from growspace_gantry.main import default_calibration

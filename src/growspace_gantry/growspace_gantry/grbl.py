@@ -15,10 +15,10 @@ every byte sent and not yet acknowledged by its ``ok`` / ``error``.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 import math
 import re
-from typing import Mapping, Union
 
 RX_BUFFER_BYTES = 128  # GRBL 1.1's serial receive buffer (the $I line [OPT:...,15,128])
 MAX_LINE_BYTES = 80  # GRBL's line buffer: a longer line is refused with error:14 (1.1: 11)
@@ -183,7 +183,7 @@ class Unknown:
     text: str
 
 
-Event = Union[Ok, Error, Alarm, Banner, Status, Message, Feedback, Setting, StartupLine, Unknown]
+Event = Ok | Error | Alarm | Banner | Status | Message | Feedback | Setting | StartupLine | Unknown
 
 _BANNER = re.compile(r"^Grbl\s+(\S+)\s+\['\$' for help\]$")
 _SETTING = re.compile(r'^\$(\d+)=(-?[0-9.]+)')

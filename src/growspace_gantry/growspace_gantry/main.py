@@ -9,11 +9,12 @@ unplug: the node runs and says so on ``gantry/status``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import logging
 import os
 import sys
 import threading
-from typing import Any, Sequence
+from typing import Any
 
 from growspace_gantry import calibration
 from growspace_gantry.controller import GrblController, Log

@@ -1,18 +1,21 @@
 """The gantry node's logic over the simulator's ``Transport``: topics in, moves out, safety.
 
-Same topics and messages as ``sim_node`` (``growspace_sim.node.interface``), relative to the
+Same topics and messages as ``sim_node`` (``growspace_sim.ros.interface``), relative to the
 chamber namespace:
 
-| topic / service | type | direction |
-|---|---|---|
-| ``light/command`` | growspace_msgs/LightCommand | in: every mode; actions move the light by the simulator's own rules |
-| ``reset`` | growspace_msgs/ResetRequest | in: places the light as the simulator would for that seed and challenge |
-| ``gantry/estop`` | std_msgs/Empty (topic) and std_srvs/Trigger (service) | in: feed hold, lamp off, soft reset |
-| ``gantry/unlock``, ``gantry/home`` | std_srvs/Trigger | in: a person's ``$X`` / ``$H`` |
-| ``chamber/config`` | std_msgs/String (latched JSON) | out |
-| ``light/state`` | growspace_msgs/LightCommand | out: the light the controller REPORTS reaching |
-| ``step_result`` | growspace_msgs/StepResult | out: once per reset and lockstep command, when the move is done |
-| ``gantry/status`` | diagnostic_msgs/DiagnosticArray | out: state, position, alarm, buffer, link (1 Hz and on change) |
+- in ``light/command`` (growspace_msgs/LightCommand): every mode; actions move the light by the
+  simulator's own rules
+- in ``reset`` (growspace_msgs/ResetRequest): places the light as the simulator would for that
+  seed and challenge
+- in ``gantry/estop`` (std_msgs/Empty topic and std_srvs/Trigger service): feed hold, lamp off,
+  soft reset
+- in ``gantry/unlock``, ``gantry/home`` (std_srvs/Trigger): a person's ``$X`` / ``$H``
+- out ``chamber/config`` (std_msgs/String, latched JSON)
+- out ``light/state`` (growspace_msgs/LightCommand): the light the controller REPORTS reaching
+- out ``step_result`` (growspace_msgs/StepResult): once per reset and lockstep command, when the
+  move is done
+- out ``gantry/status`` (diagnostic_msgs/DiagnosticArray): state, position, alarm, buffer, link
+  (1 Hz and on change)
 
 The light model is a ``Simulation`` that is never stepped: its light moves by ``core.light``
 (clamped inside the chamber exactly as in the simulator) and a reset places it with the task's
@@ -24,23 +27,25 @@ fault (alarm, lost link, estop) leaves the lamp off; nothing ever unlocks an ala
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import dataclasses
 import json
 import secrets
 import time
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController
 from growspace_gantry.settings import GantryParams
-from growspace_sim import __version__, convert
+from growspace_sim import __version__
+from growspace_sim.ros import convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
 from growspace_sim.node.chamber_node import EPISODE_OVER, Recorder, step_id_error
-from growspace_sim.node.interface import (
+from growspace_sim.ros.interface import (
     COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, STRING, Topic)
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import re
 
-from growspace_sim.convert import MAX_SEED
+from growspace_sim.ros.convert import MAX_SEED
 from growspace_sim.core.config import Bounds
 from growspace_sim.node.params import check_bounds, MODES, ParamError
 

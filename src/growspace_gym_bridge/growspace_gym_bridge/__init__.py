@@ -2,7 +2,7 @@
 
 ``GrowSpaceBridgeEnv`` (in ``growspace_gym_bridge.envs``) drives a lockstep ``sim_node`` by
 publishing resets and light commands and waiting for the replies with matching ids; the
-in-process twins live in ``growspace_sim.envs``. Importing this package registers the ids
+in-process twins live in ``growspace_sim.envs.env``. Importing this package registers the ids
 ``GrowSpaceROS/Control-Easy-v0`` ... (see ``registration``) and imports nothing heavy.
 """
 

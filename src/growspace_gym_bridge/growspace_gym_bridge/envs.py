@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import itertools
 import os
 import secrets
 import time
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 from gymnasium.utils import EzPickle
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs import as_action_index, spaces_for
+from growspace_sim.envs.env import as_action_index, spaces_for
 from growspace_sim.node import params as node_params_mod
 from growspace_sim.node.chamber_node import EPISODE_OVER
 from growspace_sim.ros import loopback
@@ -53,7 +54,7 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
     """The GrowSpace challenges played through a lockstep ``sim_node`` over ROS 2 topics.
 
     ## Description
-    The same task as ``growspace_sim.envs.GrowSpaceEnv`` (same spaces, rewards, infos and,
+    The same task as ``growspace_sim.envs.env.GrowSpaceEnv`` (same spaces, rewards, infos and,
     for the same seed and actions, bit-identical observations), but the chamber runs in a
     ``sim_node`` process: ``reset`` publishes a ``ResetRequest`` on ``reset``, ``step``
     publishes a ``LightCommand`` on ``light/command`` with a step id, and both wait for the

@@ -9,13 +9,14 @@ a late or duplicate reply and is dropped, never taken for the current step.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 import json
 import time
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS, STRING
 from growspace_sim.ros import qos as ros_qos, types
 
@@ -233,8 +234,8 @@ class ChamberLink:
                     'the step result came but not this output'
                 raise BridgeTimeout(self.transport.resolve(missing), timeout_s, step_id,
                                     reset_id, f'{detail} to {request}')
-            self.liveness(lambda: f'{self.transport.resolve(missing)} (step_id {step_id}, '
-                          f'reset_id {reset_id})')
+            self.liveness(lambda topic=missing: f'{self.transport.resolve(topic)} '
+                          f'(step_id {step_id}, reset_id {reset_id})')
             self.transport.spin_once(min(remaining, SPIN_S))
 
     def _finish(self, reply: Reply, stamp: int | None = None) -> Reply:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import gymnasium as gym
 
 from growspace_sim.core import task as tasks
-from growspace_sim.registration import env_id
+from growspace_sim.envs.registration import env_id
 
 PREFIX = 'GrowSpaceROS'
 ENTRY_POINT = 'growspace_gym_bridge.envs:GrowSpaceBridgeEnv'

@@ -12,6 +12,6 @@ try:
 except ImportError:  # a ROS machine running only the node
     pass
 else:
-    from growspace_sim.registration import register_envs
+    from growspace_sim.envs.registration import register_envs
 
     register_envs()

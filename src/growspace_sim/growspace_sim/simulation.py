@@ -6,7 +6,7 @@ the same actions give the same images, rewards and plants whichever way they arr
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -88,8 +88,8 @@ RULES = {
                     'first_branch_height x chamber_width < chamber_height'),
     **dict.fromkeys(('max_branching', 'episode_length'),
                     f'max_branching x episode_length <= {MAX_NODES}'),
-    'image_size': '0 = the challenge\'s default (84, or 28 for shape)',
-    'digits': 'each 0..9; empty = the setting\'s digit (easy 3, hard 0)',
+    'image_size': "0 = the challenge's default (84, or 28 for shape)",
+    'digits': "each 0..9; empty = the setting's digit (easy 3, hard 0)",
 }
 
 
@@ -163,7 +163,8 @@ class SimConfig:
                 isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= 9
                 for d in self.digits):
             raise ValueError(f'digits must be a tuple of ints in 0..9, got {self.digits!r}.')
-        task.validate(self)
+        if task.multi_plant and self.n_plants < 2:
+            raise ValueError(f'n_plants must be at least 2 for {task.name}, got {self.n_plants}.')
 
     @classmethod
     def from_dict(cls, values: dict) -> SimConfig:
@@ -197,7 +198,8 @@ class SimConfig:
 
     @property
     def plant_count(self) -> int:
-        return self.task.plant_count(self)
+        """Plants that grow: ``n_plants`` in a multi-plant challenge, else one."""
+        return self.n_plants if self.task.multi_plant else 1
 
     @property
     def resolution(self) -> int:

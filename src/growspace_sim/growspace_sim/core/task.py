@@ -7,20 +7,18 @@ growth, shading, light actions, rendering, the node) is shared. ``SimConfig.chal
 registered task; adding a challenge is one module that builds a ``Task`` and calls ``register``
 (``docs/architecture.md`` has an example). The built-in challenges live in ``core/tasks/``.
 
-This module imports numpy only: a task is plain data and functions of numpy arrays.
+This module imports numpy only: a task is plain data and functions of numpy arrays. It is the
+bottom of the core (``SimConfig`` names a task, the chamber calls it), so it imports no other
+core module; the functions' argument types are named in their comments.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
+from typing import Any, Protocol
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from growspace_sim.core.chamber import Chamber
-    from growspace_sim.core.config import SimConfig
-    from growspace_sim.core.state import ChamberState
 
 SETTINGS = ('easy', 'hard')
 
@@ -40,7 +38,8 @@ class Layout:
 class Oracle(Protocol):
     """A privileged policy: reads the chamber, returns a discrete action index."""
 
-    def act(self, chamber: Chamber) -> int: ...
+    def act(self, chamber: Any) -> int:
+        """The action for a ``core.chamber.Chamber`` in its current state."""
 
 
 @dataclass(frozen=True, eq=False)  # a task is itself: compared and hashed by identity
@@ -53,8 +52,8 @@ class Task:
 
     name: str  # the value of SimConfig.challenge, e.g. 'find_plant'
     env_name: str  # the Gymnasium id part: GrowSpace/<env_name>[Continuous]-<Setting>-v0
-    layout: Callable[[SimConfig, np.random.Generator], Layout]  # the start of an episode
-    score: Callable[[ChamberState, SimConfig], Score]  # the reward of a state
+    layout: Callable[..., Layout]  # (SimConfig, np.random.Generator) -> the episode's start
+    score: Callable[..., Score]  # (ChamberState, SimConfig) -> the reward of a state
     spotlight: bool = False  # True: circular spotlight (x, z, radius); False: vertical beam
     resolution: int = 84  # px, the observation side when SimConfig.image_size is 0
     multi_plant: bool = False  # True: SimConfig.n_plants plants grow; False: one
@@ -63,19 +62,6 @@ class Task:
     settings: tuple[str, ...] = SETTINGS
     # More Gymnasium ids: id -> (entry point, kwargs), e.g. the shape curriculum.
     extra_envs: Mapping[str, tuple[str, Mapping[str, Any]]] = field(default_factory=dict)
-
-    def plant_count(self, cfg: SimConfig) -> int:
-        """Plants that grow in this challenge."""
-        return cfg.n_plants if self.multi_plant else 1
-
-    def validate(self, cfg: SimConfig) -> None:
-        """Check the config fields this challenge constrains (SimConfig checks the setting).
-
-        Raises:
-            ValueError: naming the field, the value and what is allowed.
-        """
-        if self.multi_plant and cfg.n_plants < 2:
-            raise ValueError(f'n_plants must be at least 2 for {self.name}, got {cfg.n_plants}.')
 
 
 _REGISTRY: dict[str, Task] = {}

@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents import OracleAgent, RandomAgent, play_episodes
+from growspace_sim.agents.reference import OracleAgent, RandomAgent, play_episodes
 
 EVAL_ENV = {'GrowSpace/Shape-Curriculum-v0': 'GrowSpace/Shape-AllDigits-v0'}
 COLUMNS = ('case', 'env', 'agent', 'runs', 'episodes', 'steps', 'mean', 'se')
@@ -52,7 +52,7 @@ class Row:
 
 
 class PolicyAgent:
-    """A Stable-Baselines3 model behind the ``Agent`` protocol of ``growspace_sim.agents``."""
+    """A Stable-Baselines3 model behind the ``Agent`` protocol (``growspace_sim.agents``)."""
 
     def __init__(self, model, deterministic: bool = True) -> None:
         self.model, self.deterministic = model, deterministic

@@ -14,7 +14,8 @@ them; read ``venv.chambers[i].tip_positions()``).
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 from gymnasium.vector import AutoresetMode
@@ -22,7 +23,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from growspace_sim.vector_env import GrowSpaceVectorEnv, LIGHT_KEYS
+from growspace_sim.envs.vector import GrowSpaceVectorEnv, LIGHT_KEYS
 
 
 class NativeVecEnv(VecEnv):

@@ -1,6 +1,6 @@
 """The chamber node's logic, written once against ``transport.Transport``.
 
-Its topics, their QoS and publishing order are the table in ``node.interface``. Lockstep: every
+Its topics, their QoS and publishing order are the table in ``ros.interface``. Lockstep: every
 LightCommand whose step_id is above the last one processed since the latest reset is answered
 by exactly one StepResult with that step_id (after one step, or without a step when the command
 is invalid or the episode is over). Realtime: a timer steps at rate_hz with the latest command.
@@ -15,18 +15,19 @@ start. A failing recorder never stops the chamber: the node reports it once and 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 import dataclasses
 import math
 import secrets
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
-from growspace_sim.node.interface import (
+from growspace_sim.ros.interface import (
     COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, STRING, config_json,
     digit_fingerprint, growspace_metadata)
 from growspace_sim.node.params import NodeParams, ParamError, as_values, build
@@ -258,7 +259,7 @@ class ChamberNode:
                 asked, applied = float(getattr(msg, field)), getattr(light, field)
                 if asked != applied:
                     self.log.warn(f'command:clamped:{field}', f'light/command: {field} = '
-                                  f'{asked!r} m is outside the light\'s limits; clamped to '
+                                  f"{asked!r} m is outside the light's limits; clamped to "
                                   f'{applied!r} m.')
         return ''
 

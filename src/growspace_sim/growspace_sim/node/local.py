@@ -11,8 +11,9 @@ holds no history. ``episode_runner`` drives a ``ChamberNode`` over it, and
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable
 import logging
-from typing import Any, Callable
+from typing import Any
 
 from growspace_sim.node.params import DEFAULT_NODE_NAME
 from growspace_sim.node.transport import (

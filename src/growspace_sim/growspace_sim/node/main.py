@@ -13,12 +13,13 @@ before rclpy is up (imports, start-up) ends the node as soon as it would start s
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 import logging
 import os
 import signal
 import sys
 import threading
-from typing import Any, Callable, Protocol, Sequence
+from typing import Any, Protocol
 
 from growspace_sim.node import params
 from growspace_sim.node.chamber_node import ChamberNode, Recorder

@@ -17,7 +17,7 @@ from typing import Any
 
 import yaml
 
-from growspace_sim.convert import MAX_SEED
+from growspace_sim.ros.convert import MAX_SEED
 from growspace_sim.core import config as sim_config
 from growspace_sim.core.config import Bounds, SimConfig
 

@@ -14,13 +14,14 @@ own rclpy state or signal handlers.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 import contextlib
 import importlib
 import io
 import os
 import sys
 import time
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from growspace_sim.node.params import ParamSpec
 from growspace_sim.node.transport import (

@@ -1,8 +1,8 @@
 """The seam between the node logic and the middleware.
 
 The node, the bridge's link, teleop and the recorder are written once against ``Transport``.
-Messages cross the seam as rosbags dataclasses (built by ``growspace_sim.convert``) together with
-their exact CDR bytes, which the recorder stores unchanged. Two implementations:
+Messages cross the seam as rosbags dataclasses (built by ``growspace_sim.ros.convert``)
+together with their exact CDR bytes, which the recorder stores unchanged. Two implementations:
 ``node.rclpy_transport.RclpyTransport`` (ROS 2) and ``node.local.LocalTransport`` (in process, on
 a simulated clock; ``node.fake.FakeTransport`` adds what tests inspect).
 
@@ -12,8 +12,9 @@ exception escaping a callback is caught here; both end as a throttled warning.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import time
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 from growspace_sim.ros import qos as ros_qos
 

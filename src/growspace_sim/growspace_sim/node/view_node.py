@@ -20,12 +20,13 @@ the node never stops for bad input. Exit codes: 0 after SIGINT/SIGTERM, 2 for a 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 import sys
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any
 
-from growspace_sim import convert
-from growspace_sim.node.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.ros import convert
+from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
 from growspace_sim.node.main import console_main, run_node
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types

@@ -14,7 +14,7 @@ and ``mcap_ros2`` read (the rosbag2 MCAP storage conventions, docs/recording.md)
   chamber geometry (``growspace_metadata``).
 
 The chamber's side of the contract (topics, ``chamber/config`` payload, the ``growspace``
-metadata) lives in ``growspace_sim.node.interface``; the names below re-export it because they
+metadata) lives in ``growspace_sim.ros.interface``; the names below re-export it because they
 are part of the file format.
 
 Example:
@@ -26,7 +26,7 @@ Modules: ``recorder`` (``McapRecorder``, signals, exit), ``chunk_writer`` (the b
 writer) and ``recovery`` (``recover``).
 """
 
-from growspace_sim.node.interface import (  # noqa: F401 - re-exported: part of the file format
+from growspace_sim.ros.interface import (  # noqa: F401 - re-exported: part of the file format
     FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 from growspace_sim.recording.recorder import (
     CHUNK_SIZE, FLUSH_PERIOD_S, LIBRARY, McapRecorder, PROFILE, RecordingError, stop_on_signals)

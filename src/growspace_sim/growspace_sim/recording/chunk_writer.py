@@ -7,10 +7,11 @@ Records follow the MCAP specification and are read back by mcap's own reader in 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 import queue
 import struct
 import threading
-from typing import Any, BinaryIO, Callable, Iterable
+from typing import Any, BinaryIO
 import zlib
 
 from mcap.data_stream import RecordBuilder

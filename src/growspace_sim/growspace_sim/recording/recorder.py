@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import atexit
+from collections.abc import Iterable, Iterator
 import contextlib
 import os
 from pathlib import Path
 import signal
 import threading
 import time
-from typing import Any, BinaryIO, Iterable, Iterator
+from typing import Any, BinaryIO
 import weakref
 
 import mcap

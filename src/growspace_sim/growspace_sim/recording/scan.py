@@ -12,12 +12,13 @@ summary's chunk index names, if the file has a readable summary; otherwise it st
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 import dataclasses
 import io
 import json
 import os
 import struct
-from typing import BinaryIO, Iterator, Sequence, Union
+from typing import BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -26,7 +27,7 @@ from mcap.stream_reader import breakup_chunk
 
 from growspace_sim.recording.chunk_writer import MAGIC
 
-Record = Union[Schema, Channel, Message, Metadata]
+Record = Schema | Channel | Message | Metadata
 _PREFIX = struct.Struct('<BQ')  # every record: opcode, content length
 _KNOWN = frozenset(int(op) for op in Opcode)
 _PARSERS = {int(Opcode.SCHEMA): Schema, int(Opcode.CHANNEL): Channel,
@@ -119,7 +120,7 @@ class McapScan:
             prefix = stream.read(_PREFIX.size)
             if len(prefix) < _PREFIX.size:
                 self._stop(pos, size, 'the file ends inside a record' if prefix
-                           else 'the file ends before the data section\'s end record')
+                           else "the file ends before the data section's end record")
                 return
             opcode, length = _PREFIX.unpack(prefix)
             end = pos + _PREFIX.size + length

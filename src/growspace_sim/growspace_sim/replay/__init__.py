@@ -17,7 +17,7 @@
 An unreadable chunk never stops a reader: it is skipped and named (``Bag.damage``).
 
 Messages are read in file order, which is the order the node handled them in (the topics and
-their order are ``node.interface``; the episode structure is in ``docs/recording.md``).
+their order are ``ros.interface``; the episode structure is in ``docs/recording.md``).
 
 Modules, one job each: ``bag`` (reading), ``episodes`` (episode structure, summary), ``resim``
 (bit-for-bit re-simulation), ``export`` (GIF/MP4), ``play`` (republishing over rclpy),

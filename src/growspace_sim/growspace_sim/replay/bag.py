@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any
 
 from mcap.records import Message
 
-from growspace_sim.node.interface import TOPICS
+from growspace_sim.ros.interface import TOPICS
 from growspace_sim.recording import PROFILE
 from growspace_sim.recording.scan import (
     Damage, damage_from_metadata, McapScan, RECOVERY_METADATA)

@@ -7,7 +7,7 @@ import dataclasses
 import math
 import os
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.replay.bag import Bag
 from growspace_sim.replay.episodes import Episode, read_episodes
 

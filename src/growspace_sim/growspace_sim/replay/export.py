@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import os
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError

@@ -10,13 +10,14 @@ plant and the view image and no ROS install.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import os
-from typing import Any, Callable
+from typing import Any
 
 from tqdm import tqdm
 
-from growspace_sim import convert
-from growspace_sim.node.interface import OBSERVATION_QOS
+from growspace_sim.ros import convert
+from growspace_sim.ros.interface import OBSERVATION_QOS
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.ros import types

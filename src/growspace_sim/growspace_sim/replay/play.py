@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 import os
 import time
-from typing import Callable, Iterable
 
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import dataclasses
 import os
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from growspace_sim import convert
-from growspace_sim.node.interface import digit_fingerprint
+from growspace_sim.ros import convert
+from growspace_sim.ros.interface import digit_fingerprint
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
@@ -76,11 +77,11 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     report = ResimReport()
     with Bag(path) as bag:
         topics = bag.chamber_topics(namespace)
-        for rel, full in topics.items():
+        for full in topics.values():
             recorded_hash = bag.topics[full].type_hash
             if recorded_hash and recorded_hash != types.type_hash(bag.topics[full].typename):
                 report.warnings.append(f'{full}: recorded type hash {recorded_hash} differs '
-                                       f'from this version\'s message definition.')
+                                       f"from this version's message definition.")
         meta = bag.metadata.get(METADATA_NAME, {})
         source = digit_source or meta.get('digit_source') or 'auto'
         lockstep = meta.get('mode') != 'realtime'

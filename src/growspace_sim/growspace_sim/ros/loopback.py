@@ -11,9 +11,9 @@ Both are read when the first ROS context of a process starts, so call ``confine`
 
 from __future__ import annotations
 
+from collections.abc import MutableMapping
 import os
 from pathlib import Path
-from typing import MutableMapping
 
 RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'

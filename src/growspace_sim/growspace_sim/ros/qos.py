@@ -1,6 +1,6 @@
 """ROS 2 QoS profiles as plain data: what the chamber offers, and what its recordings say.
 
-The node's topic table (``node.interface``) is written with these profiles; the rclpy transport
+The node's topic table (``ros.interface``) is written with these profiles; the rclpy transport
 turns them into ``rclpy.qos.QoSProfile`` (``node.rclpy_transport.to_rclpy_qos``) and the recorder
 writes them into each MCAP channel as rosbag2's ``offered_qos_profiles`` YAML, so the in-process
 recorder, which has no rclpy, writes the same metadata as a live node.
@@ -8,9 +8,10 @@ recorder, which has no rclpy, writes the same metadata as a live node.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import dataclasses
 import functools
-from typing import Any, Sequence
+from typing import Any
 
 import yaml
 

@@ -290,7 +290,7 @@ def serialize(msg: Any, typename: str) -> bytes:
     return bytes(data)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cdr_functions(typename: str) -> tuple[Any, Any]:
     """rosbags' generated size and little-endian writer of a type, looked up once.
 
@@ -301,7 +301,7 @@ def _cdr_functions(typename: str) -> tuple[Any, Any]:
     return msgdef.getsize_cdr, msgdef.serialize_cdr_le
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cdr_readers(typename: str) -> tuple[Any, Any, type]:
     msgdef = typestore().get_msgdef(typename)
     return msgdef.deserialize_cdr_le, msgdef.deserialize_cdr_be, msgdef.cls

@@ -1,8 +1,8 @@
 """Experiments as Ray Tune trials: agents x env ids x seeds (``growspace-sweep``).
 
 Every trial is one agent on one env id with one seed, run by the function the single-run
-commands use: ``growspace_sim.evaluate.play_agent`` (``growspace-eval``) for the random agent and
-the oracle, ``growspace_sim.learn.train.train`` (``growspace-train``) then
+commands use: ``growspace_sim.agents.evaluate.play_agent`` (``growspace-eval``) for the random
+agent and the oracle, ``growspace_sim.learn.train.train`` (``growspace-train``) then
 ``growspace_sim.learn.evaluate_policies.evaluate_env`` (``growspace-compare``) for PPO, A2C, DQN
 and Rainbow. All trials are evaluated on the same episode seeds, so the experiment's table and
 reward-curve figure are ``growspace-compare``'s, from all trials.

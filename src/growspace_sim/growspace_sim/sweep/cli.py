@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--fresh-processes', action='store_true',
                         help='run every trial in a new worker process (slower)')
     parser.add_argument('--no-plots', action='store_true')
-    parser.add_argument('--quiet', action='store_true', help="no Ray Tune status tables")
+    parser.add_argument('--quiet', action='store_true', help='no Ray Tune status tables')
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')

@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
 import importlib.util
 import math
 import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import yaml
 
-from growspace_sim import evaluate
+from growspace_sim.agents import evaluate
 
 
 BASELINES = evaluate.AGENTS

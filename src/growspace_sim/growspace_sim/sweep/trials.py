@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 import contextlib
 import csv
 import json
@@ -12,13 +13,13 @@ import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
-from growspace_sim import evaluate
+from growspace_sim.agents import evaluate
 from growspace_sim.learn import evaluate_policies
 from growspace_sim.sweep.spec import BASELINES, Spec, SpecError, Trial
 
@@ -78,7 +79,7 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     summary = dict(trial=asdict(trial), key=trial.key, label=trial.label or label,
                    eval_env=eval_env, steps=steps, mean=mean, se=se, wall_s=round(wall, 3),
                    host=socket.gethostname(), pid=os.getpid(),
-                   started=datetime.fromtimestamp(started, timezone.utc).isoformat())
+                   started=datetime.fromtimestamp(started, UTC).isoformat())
     (out / 'trial.json').write_text(json.dumps(summary, indent=2) + '\n')
     return {'mean': mean, 'se': se, 'wall_s': wall}
 

@@ -15,9 +15,10 @@ who can reach it, with no authentication.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 import logging
 import threading
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import foxglove
 from foxglove.websocket import Capability, ChannelView, Client, ClientChannel, StatusLevel

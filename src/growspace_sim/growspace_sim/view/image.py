@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.view.scene import Frame
 
 DEFAULT_SIZE = 512  # px

@@ -23,13 +23,14 @@ RViz draws triangle lists double-sided (no back-face culling), so the ribbons sh
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import functools
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.view.scene import Frame
 
@@ -60,12 +61,12 @@ FIXED_IDS = (('chamber', 0), ('light', 0), ('target', 0), ('photons', 0), ('phot
              ('status', 0))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cls(typename: str) -> type:
     return types.msg_class(typename)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _empty() -> dict[str, Any]:
     """The unused Marker fields, shared by every marker (they are never modified)."""
     return {

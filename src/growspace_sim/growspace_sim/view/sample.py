@@ -7,11 +7,12 @@ result), without a ROS graph.
 
 from __future__ import annotations
 
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.node.interface import STRING, config_json
+from growspace_sim.ros.interface import STRING, config_json
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.simulation import Simulation
 

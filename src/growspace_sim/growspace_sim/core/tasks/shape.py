@@ -65,7 +65,7 @@ TASK = register(Task(
     name='shape', env_name='Shape', layout=layout, score=score, spotlight=True, resolution=28,
     digits={'easy': (3,), 'hard': (0,)}, oracle=ShapeOracle,
     extra_envs={
-        'GrowSpace/Shape-AllDigits-v0': ('growspace_sim.envs:GrowSpaceEnv',
+        'GrowSpace/Shape-AllDigits-v0': ('growspace_sim.envs.env:GrowSpaceEnv',
                                          {'challenge': 'shape', 'digits': tuple(range(10))}),
-        'GrowSpace/Shape-Curriculum-v0': ('growspace_sim.envs:make_curriculum', {}),
+        'GrowSpace/Shape-Curriculum-v0': ('growspace_sim.envs.env:make_curriculum', {}),
     }))

@@ -24,7 +24,7 @@ MODE_BEAM, MODE_SPOT, MODE_DISCRETE, MODE_CONTINUOUS = 0, 1, 2, 3
 MAX_SEED = 2**63 - 1  # seeds travel as uint64; numpy takes any non-negative int
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cls(typename: str) -> type:
     """The message class of a type (cached: messages are built on every step)."""
     return types.msg_class(typename)

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from growspace_sim import replay
-from growspace_sim.agents import OracleAgent, RandomAgent
+from growspace_sim.agents.reference import OracleAgent, RandomAgent
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
 from growspace_sim.ros import loopback
 

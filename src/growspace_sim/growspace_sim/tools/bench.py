@@ -40,7 +40,7 @@ import growspace_sim  # noqa: F401  (registers the ids)
 from growspace_sim.core import light as lights
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core import task as tasks
-from growspace_sim.registration import env_id
+from growspace_sim.envs.registration import env_id
 from growspace_sim.simulation import Simulation
 
 TARGETS = {'control': 40_000}  # env steps/s on one core (issue 17; issue 9 asked 10,000)

@@ -9,7 +9,8 @@ merging, and one array per observation.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 from gymnasium.vector import AutoresetMode
@@ -19,7 +20,7 @@ import numpy as np
 from growspace_sim import digits as digit_data
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs import OBSERVATIONS, spaces_for
+from growspace_sim.envs.env import OBSERVATIONS, spaces_for
 from growspace_sim.simulation import Simulation
 
 LIGHT_KEYS = ('x', 'z', 'width', 'radius')

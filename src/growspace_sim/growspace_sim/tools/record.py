@@ -14,24 +14,27 @@ SIGINT and SIGTERM finish the file (summary and indexes) before exiting.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 import json
 import logging
 import os
 import sys
 import time
-from typing import Any, Callable
+from typing import Any
 
-from growspace_sim import convert, recording
+from growspace_sim import recording
+
+from growspace_sim.ros import convert
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
-from growspace_sim.node.interface import TOPICS
+from growspace_sim.node.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
+from growspace_sim.ros.interface import TOPICS
 from growspace_sim.ros import names, qos as ros_qos
 
 
 def run(args: argparse.Namespace) -> int:
     """Record ``args.episodes`` episodes of an agent; returns the exit status."""
-    from growspace_sim.agents import OracleAgent, RandomAgent
+    from growspace_sim.agents.reference import OracleAgent, RandomAgent
 
     cfg = SimConfig(challenge=args.challenge, setting=args.setting)
     with recording.stop_on_signals(), \

@@ -2,7 +2,7 @@
 
 Every registered ``Task`` (``core.task``) gets ``GrowSpace/<env_name>[Continuous]-<Setting>-v0``
 for each of its settings, plus its ``extra_envs``; each id also gets the native vector env
-(``vector_env``) as its ``vector_entry_point`` (``gymnasium.make_vec``). Importing this
+(``envs.vector``) as its ``vector_entry_point`` (``gymnasium.make_vec``). Importing this
 module imports Gymnasium and the numpy core only, not the environments (nor OpenCV), so that
 ``import growspace_sim`` stays cheap and the core stays importable without OpenCV.
 """
@@ -13,11 +13,11 @@ import gymnasium as gym
 
 from growspace_sim.core import task as tasks
 
-ENTRY_POINT = 'growspace_sim.envs:GrowSpaceEnv'
-VECTOR_ENTRY_POINT = 'growspace_sim.vector_env:GrowSpaceVectorEnv'  # gymnasium.make_vec
+ENTRY_POINT = 'growspace_sim.envs.env:GrowSpaceEnv'
+VECTOR_ENTRY_POINT = 'growspace_sim.envs.vector:GrowSpaceVectorEnv'  # gymnasium.make_vec
 VECTOR_ENTRY_POINTS = {  # entry point -> the native vector env that plays the same episodes
     ENTRY_POINT: VECTOR_ENTRY_POINT,
-    'growspace_sim.envs:make_curriculum': 'growspace_sim.vector_env:make_curriculum_vector',
+    'growspace_sim.envs.env:make_curriculum': 'growspace_sim.envs.vector:make_curriculum_vector',
 }
 
 

@@ -1,7 +1,7 @@
 """What a chamber puts on the wire: its topics, their QoS and order, and how it describes itself.
 
 One table for every producer and reader of chamber messages: ``ChamberNode`` subscribes and
-publishes from it, ``recording`` and ``recorder_cli`` name their channels from it and ``replay``
+publishes from it, ``recording`` and ``tools.record`` name their channels from it and ``replay``
 finds a chamber's topics with it. The ``chamber/config`` payload and the recording's
 ``growspace`` metadata record are built here too, so that the node (on rclpy or in
 process) is the only producer of both. Nothing here imports MCAP: a node that does not record
@@ -28,7 +28,9 @@ import hashlib
 import json
 from typing import Any, NamedTuple
 
-from growspace_sim import __version__, convert
+from growspace_sim import __version__
+
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.ros import qos as ros_qos, types
 

@@ -5,18 +5,19 @@ sends the last step_id seen on ``step_result`` + 1; in realtime mode step_id 0. 
 light kind come from the node's latched ``chamber/config`` and from ``light/state``.
 
 Usage: ``ros2 run growspace_sim teleop --ros-args -r __ns:=/chamber1`` or
-``python -m growspace_sim.teleop --ros-args -r __ns:=/chamber1``.
+``python -m growspace_sim.tools.teleop --ros-args -r __ns:=/chamber1``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import curses
 import json
 import secrets
 import sys
-from typing import Any, Sequence
+from typing import Any
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS

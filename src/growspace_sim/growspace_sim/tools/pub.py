@@ -2,7 +2,7 @@
 
 Example (the same YAML value as the ``ros2`` command line)::
 
-    python -m growspace_sim.node.pub /light/command growspace_msgs/msg/LightCommand \\
+    python -m growspace_sim.tools.pub /light/command growspace_msgs/msg/LightCommand \\
         "{mode: 0, x: 0.3, width: 0.1}"
 
 Waits until a subscriber matched (up to ``--wait`` seconds), publishes once with the node's
@@ -14,19 +14,19 @@ the wrong type is an error naming it (exit 2).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 import os
 import sys
 import time
-from typing import Sequence
 
 import yaml
 
-from growspace_sim.node.interface import COMMAND_QOS
+from growspace_sim.ros.interface import COMMAND_QOS
 from growspace_sim.ros import types
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog='python -m growspace_sim.node.pub',
+    parser = argparse.ArgumentParser(prog='python -m growspace_sim.tools.pub',
                                      description=__doc__.split('\n', 1)[0])
     parser.add_argument('topic', help='topic name, e.g. /light/command or /chamber1/reset')
     parser.add_argument('type', help='message type, e.g. growspace_msgs/msg/LightCommand')

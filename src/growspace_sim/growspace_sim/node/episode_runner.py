@@ -5,18 +5,19 @@ The runner is a lockstep client of a real ``ChamberNode`` on an in-memory transp
 the node handles, publishes and records them exactly as it does on rclpy. So a recording
 made here and one made by ``sim_node --ros-args -p record_path:=...`` have the same channels,
 message order, stamps and metadata, and re-simulate the same way; the sample bags, the recording
-tests and the benchmark use it. The message order and stamps are the node's (``node.interface``
+tests and the benchmark use it. The message order and stamps are the node's (``ros.interface``
 and ``docs/recording.md``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import dataclasses
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from growspace_sim import convert
+from growspace_sim.ros import convert
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS

@@ -20,9 +20,9 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents import Agent, OracleAgent, RandomAgent, play_episodes
+from growspace_sim.agents.reference import Agent, OracleAgent, RandomAgent, play_episodes
 from growspace_sim.core import task as tasks
-from growspace_sim.registration import env_id
+from growspace_sim.envs.registration import env_id
 
 AGENTS = ('random', 'oracle')
 COLUMNS = ('challenge', 'setting', 'episodes', 'random_mean', 'random_se', 'oracle_mean',
