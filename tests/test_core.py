@@ -397,12 +397,17 @@ def test_bounds_keep_an_episode_on_a_small_machine(field, value, allowed):
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='reads /proc/self/status')
 def test_long_episodes_reset_in_linear_memory():
     """Issue 10: episode_length 20,000 used to need an 11.9 GiB ancestors table. Memory only:
-    reset time is the benchmark's business (growspace-bench prints it), not a unit test's."""
+    reset time is the benchmark's business (growspace-bench prints it), not a unit test's.
+    The kernels are loaded first (numba, LLVM and, where installed, scipy, which numba imports:
+    about 60 MiB whatever the episode), so what is measured is the episode's own memory."""
     code = ('import numpy as np\n'
             'from growspace_sim.core.chamber import Chamber\n'
             'from growspace_sim.core.config import SimConfig\n'
             'def peak():  # kB; ru_maxrss would include the parent (it survives exec)\n'
             '    return int(open("/proc/self/status").read().split("VmHWM:")[1].split()[0])\n'
+            'w = Chamber(SimConfig(episode_length=2, light_density=8))\n'
+            'w.reset(np.random.default_rng(0))\n'
+            'w.step()\n'
             'before = peak()\n'
             'c = Chamber(SimConfig(episode_length=20_000, light_density=12_800))\n'
             'c.reset(np.random.default_rng(0))\n'
@@ -412,7 +417,7 @@ def test_long_episodes_reset_in_linear_memory():
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          env=child_env(), timeout=120)
     assert out.returncode == 0, out.stderr
-    assert float(out.stdout) < 50.0  # MiB for two resets and 200 steps of a 20,000-step episode
+    assert float(out.stdout) < 25.0  # MiB for two resets and 200 steps of a 20,000-step episode
 
 
 def test_config_from_dict_accepts_ros_lists():

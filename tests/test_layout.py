@@ -29,7 +29,7 @@ LAYERS = (
     ('tools',),
 )
 # Inside the core, bottom to top (tasks/ is the challenges, above everything they use).
-CORE = ('errors', 'kernels', 'task', 'config', 'light', 'state', 'chamber', 'tasks')
+CORE = ('errors', 'kernels', 'schema', 'task', 'config', 'light', 'state', 'chamber', 'tasks')
 MAX_LINES = 450
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from growspace_sim.core import config
+from growspace_sim.core import schema
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.params import NodeParams, ParamError
@@ -91,15 +91,19 @@ def test_as_values_inverts_build() -> None:
 
 
 # ---------------------------------------------------------- descriptors (ros2 param describe)
-@pytest.mark.parametrize('name', sorted(config.BOUNDS))
+BOUNDS = {f.name: p.bounds for f, p in schema.declared(SimConfig) if p.bounds is not None}
+
+
+@pytest.mark.parametrize('name', sorted(BOUNDS))
 def test_every_bound_is_what_simconfig_enforces(name: str) -> None:
-    bounds = config.BOUNDS[name]
+    bounds = BOUNDS[name]
     below = bounds.low if bounds.low_open else bounds.low - (1 if bounds.integer else 1e-6)
     for bad in (below, bounds.high * 2 + 1):
         if bad == bounds.sentinel:
             continue
-        with pytest.raises(ValueError, match=f'^{name} must be in .*got {bad!r}'):
-            SimConfig(**{name: bad})
+        value = (bad,) if name == 'digits' else bad  # each digit is bounded
+        with pytest.raises(ValueError, match=f'^(each of )?{name} must be in .*got {bad!r}'):
+            SimConfig(**{name: value})
 
 
 def test_every_number_parameter_has_a_range() -> None:
@@ -118,7 +122,9 @@ def test_specs_say_ranges_choices_rules_and_when_a_change_applies() -> None:
     width = by_name['light_width']
     assert width.rules == ('greater than 0; '
                            'light_width_min <= light_width <= light_width_max')
-    assert by_name['challenge'].rules == 'one of control, find_plant, fairness, shape'
+    assert by_name['challenge'].rules == ('one of control, find_plant, fairness, shape; or '
+                                          'module:attribute naming a Task of your own (loaded '
+                                          'on first use)')
     assert by_name['setting'].rules == 'one of easy, hard'
     assert by_name['mode'].rules == 'one of lockstep, realtime'
     assert by_name['image_size'].bounds.sentinel == 0
@@ -147,4 +153,47 @@ def test_a_node_without_runtime_changes_shows_every_parameter_read_only() -> Non
     specs = params.specs_of(SimConfig, NodeParams, runtime=False)
     assert all(s.read_only('realtime') and s.when == 'at start-up (read-only)' for s in specs)
     assert next(s for s in specs if s.name == 'light_density').bounds == \
-        config.BOUNDS['light_density']  # the ranges still show
+        BOUNDS['light_density']  # the ranges still show
+
+
+# ------------------------------------------------------------ one declaration, every view of it
+README = ROOT / 'README.md'
+
+
+def test_the_readme_table_is_the_declaration() -> None:
+    # Regenerate with: python -m growspace_sim.node.params --markdown
+    table = schema.markdown_table(SimConfig, NodeParams)
+    assert table in README.read_text(), 'README parameter table differs from the declarations'
+    assert table.count('\n') == len(params.specs()) + 1
+
+
+def test_every_declaration_says_what_it_means() -> None:
+    from growspace_gantry.settings import GantryParams
+    from growspace_sim.node.view_node import ViewParams
+
+    for cls in (SimConfig, NodeParams, GantryParams, ViewParams):
+        for field, declaration in schema.declared(cls):
+            assert declaration.doc and not declaration.doc.endswith('.'), field.name
+            if isinstance(field.default, float):
+                assert declaration.unit, f'{cls.__name__}.{field.name} has no unit'
+        assert {f.name for f, _ in schema.declared(cls)} == \
+            {f.name for f in dataclasses.fields(cls)}, f'{cls.__name__}: undeclared fields'
+
+
+@pytest.mark.parametrize(('cls', 'values', 'message'), [
+    ('GantryParams', {'baud': 0}, r'^baud must be in \[1, 4000000\], got 0\.$'),
+    ('GantryParams', {'port': ''}, r"^port must be a serial device path, got ''\.$"),
+    ('GantryParams', {'mode': 'x'}, r"^mode must be one of \('lockstep', 'realtime'\), got 'x'"),
+    ('ViewParams', {'view_size': 8}, r'^view_size must be in \[16, 4096\], got 8\.$'),
+    ('ViewParams', {'foxglove_port': 70000}, r'^foxglove_port must be in \[0, 65535\]'),
+    ('NodeParams', {'frame_id': 'a b'}, r'^frame_id must be a frame name of letters'),
+    ('NodeParams', {'auto_reset': 1}, r'^auto_reset must be a bool \(true or false\), got 1'),
+])
+def test_every_node_settings_class_validates_from_its_declarations(cls, values, message) -> None:
+    from growspace_gantry.settings import GantryParams
+    from growspace_sim.node.view_node import ViewParams
+
+    settings = {'GantryParams': GantryParams, 'ViewParams': ViewParams,
+                'NodeParams': NodeParams}[cls]
+    with pytest.raises(ParamError, match=message):
+        settings(**values)

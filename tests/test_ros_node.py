@@ -381,8 +381,9 @@ def test_describe_gives_ranges_constraints_and_when_changes_apply(client: Client
     assert d['light_width'].additional_constraints == \
         'greater than 0; light_width_min <= light_width <= light_width_max'
     assert [(r.from_value, r.to_value) for r in d['image_size'].integer_range] == [(0, 1024)]
-    assert d['challenge'].additional_constraints == \
-        'one of control, find_plant, fairness, shape'
+    assert d['challenge'].additional_constraints == (
+        'one of control, find_plant, fairness, shape; or module:attribute naming a Task of your '
+        'own (loaded on first use)')
     assert d['mode'].read_only and d['rate_hz'].read_only  # this node runs in lockstep
     assert d['rate_hz'].description.endswith('Applies at once, in realtime mode (read-only in '
                                              'lockstep).')

@@ -161,8 +161,8 @@ def test_view_node_shows_a_replayed_bag_with_its_photons() -> None:
 
 
 @pytest.mark.parametrize('args, expected', [
-    (('-p', 'view_size:=8'), 'view_size = 8 must be in [16, 4096] px'),
-    (('-p', 'foxglove_port:=70000'), 'foxglove_port = 70000 must be in [0, 65535]'),
+    (('-p', 'view_size:=8'), 'view_size must be in [16, 4096], got 8.'),
+    (('-p', 'foxglove_port:=70000'), 'foxglove_port must be in [0, 65535], got 70000.'),
     (('-p', 'foxglove_port:=8765', '-p', 'foxglove_address:=not an address'),
      'cannot start the Foxglove server on not an address:8765'),
 ])

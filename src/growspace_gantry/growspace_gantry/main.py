@@ -20,7 +20,7 @@ from growspace_gantry import calibration
 from growspace_gantry.controller import GrblController, Log
 from growspace_gantry.link import SerialLink
 from growspace_gantry.node import GantryNode
-from growspace_gantry.settings import GANTRY_BOUNDS, GantryParams
+from growspace_gantry.settings import GantryParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.main import console_main, make_recorder, run_node
@@ -46,7 +46,7 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the node until SIGINT/SIGTERM or ``stop``; the lamp is off when it returns."""
     def start(transport: Any) -> GantryNode:
         # Read at start-up only (read-only parameters): a rig is reconfigured by restart.
-        specs = params.specs_of(SimConfig, GantryParams, bounds=GANTRY_BOUNDS, runtime=False)
+        specs = params.specs_of(SimConfig, GantryParams, runtime=False)
         values, unknown = transport.declare_parameters(specs, params.check_type)
         if unknown:
             transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '

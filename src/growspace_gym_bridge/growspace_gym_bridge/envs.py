@@ -15,7 +15,7 @@ import numpy as np
 
 from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs.env import as_action_index, spaces_for
+from growspace_sim.envs.env import as_action_index, check_env_args, spaces_for
 from growspace_sim.node import params as node_params_mod
 from growspace_sim.node.chamber_node import EPISODE_OVER
 from growspace_sim.ros import loopback
@@ -129,10 +129,7 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
                           start_node=start_node, domain_id=domain_id, with_state=with_state,
                           timeout_s=timeout_s, connect_timeout_s=connect_timeout_s,
                           node_params=node_params, config=config, **overrides)
-        if observation not in ('rgb', 'features'):
-            raise ValueError(f"observation must be 'rgb' or 'features', got {observation!r}.")
-        if render_mode not in (None, 'rgb_array'):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
+        check_env_args(observation, render_mode)
         if not timeout_s > 0 or not connect_timeout_s > 0:
             raise ValueError(f'timeouts must be > 0 s, got {timeout_s!r} and '
                              f'{connect_timeout_s!r}.')

@@ -4,8 +4,9 @@ A challenge differs from another only in what a ``Task`` holds: where plants, ta
 start (``layout``), the light's kind, the observation size, the reward and success (``score``),
 how many plants grow, its shape targets, its oracle and its Gymnasium ids. Everything else (SCA
 growth, shading, light actions, rendering, the node) is shared. ``SimConfig.challenge`` names a
-registered task; adding a challenge is one module that builds a ``Task`` and calls ``register``
-(``docs/architecture.md`` has an example). The built-in challenges live in ``core/tasks/``.
+registered task, or ``module:attribute`` of a ``Task`` in a module of your own, loaded on first
+use: adding a challenge is that one module (``docs/architecture.md`` has an example). The
+built-in challenges live in ``core/tasks/``.
 
 This module imports numpy only: a task is plain data and functions of numpy arrays. It is the
 bottom of the core (``SimConfig`` names a task, the chamber calls it), so it imports no other
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+import importlib
 from typing import Any, Protocol
 
 import numpy as np
@@ -65,6 +67,7 @@ class Task:
 
 
 _REGISTRY: dict[str, Task] = {}
+_LOADED: dict[str, Task] = {}  # 'module:attribute' -> the task it named (see ``get``)
 
 
 def register(task: Task) -> Task:
@@ -84,19 +87,42 @@ def register(task: Task) -> Task:
 
 
 def unregister(name: str) -> None:
-    """Forget a task (tests that define their own); unknown names are ignored."""
-    _REGISTRY.pop(name, None)
+    """Forget a task and the ``module:attribute`` names that loaded it (tests that define
+    their own); unknown names are ignored."""
+    task = _REGISTRY.pop(name, None)
+    for key in [k for k, v in _LOADED.items() if v is task]:
+        del _LOADED[key]
 
 
 def get(name: str) -> Task:
-    """The registered task called ``name``.
+    """The task called ``name``: a registered name, or ``module:attribute`` naming a ``Task``
+    of your own, which is imported and registered the first time (as Gymnasium loads
+    ``module:EnvId``), so a challenge needs its own module and nothing else.
 
     Raises:
-        ValueError: naming the value and the registered names.
+        ValueError: naming the value and the registered names, or why the module or attribute
+            could not be loaded.
     """
-    task = _REGISTRY.get(name)
-    if task is None:
-        raise ValueError(f'challenge must be one of {names()}, got {name!r}.')
+    task = _REGISTRY.get(name) or _LOADED.get(name)
+    if task is not None:
+        return task
+    if isinstance(name, str) and ':' in name:
+        return _load(name)
+    raise ValueError(f'challenge must be one of {names()} or module:attribute naming a Task, '
+                     f'got {name!r}.')
+
+
+def _load(name: str) -> Task:
+    module_name, _, attribute = name.partition(':')
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise ValueError(f'challenge {name!r}: cannot import {module_name!r} ({e}).') from e
+    task = getattr(module, attribute, None)
+    if not isinstance(task, Task):
+        raise ValueError(f'challenge {name!r}: {module_name}.{attribute} is '
+                         f'{type(task).__name__}, not a growspace_sim.core.task.Task.')
+    _LOADED[name] = register(task)
     return task
 
 

@@ -81,10 +81,7 @@ class GrowSpaceEnv(gym.Env):
                  continuous: bool = False, observation: str = 'rgb',
                  render_mode: str | None = None, digit_source: str = 'auto',
                  config: SimConfig | None = None, **overrides: Any) -> None:
-        if observation not in OBSERVATIONS:
-            raise ValueError(f'observation must be one of {OBSERVATIONS}, got {observation!r}.')
-        if render_mode not in (None, 'rgb_array'):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
+        check_env_args(observation, render_mode)
         self.cfg = (config or SimConfig()).replace(challenge=challenge, setting=setting,
                                                    **overrides)
         self.continuous = continuous
@@ -138,6 +135,18 @@ class GrowSpaceEnv(gym.Env):
         if self.sim.digit is not None:
             info['digit'] = self.sim.digit
         return info
+
+
+def check_env_args(observation: str, render_mode: str | None) -> None:
+    """Check the arguments every GrowSpace env takes (in process, vector, bridged).
+
+    Raises:
+        ValueError: naming the argument, its value and what is allowed.
+    """
+    if observation not in OBSERVATIONS:
+        raise ValueError(f'observation must be one of {OBSERVATIONS}, got {observation!r}.')
+    if render_mode not in (None, 'rgb_array'):
+        raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
 
 
 def spaces_for(cfg: SimConfig, continuous: bool,

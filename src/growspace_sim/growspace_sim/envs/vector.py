@@ -20,7 +20,7 @@ import numpy as np
 from growspace_sim import digits as digit_data
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs.env import OBSERVATIONS, spaces_for
+from growspace_sim.envs.env import check_env_args, spaces_for
 from growspace_sim.simulation import Simulation
 
 LIGHT_KEYS = ('x', 'z', 'width', 'radius')
@@ -73,10 +73,7 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise ValueError(f'num_envs must be an int >= 1, got {num_envs!r}.')
-        if observation not in OBSERVATIONS:
-            raise ValueError(f'observation must be one of {OBSERVATIONS}, got {observation!r}.')
-        if render_mode not in (None, 'rgb_array'):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}.")
+        check_env_args(observation, render_mode)
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError as e:

@@ -1,83 +1,80 @@
 """The node's parameters: every ``SimConfig`` field plus a few node settings, and their parsing.
 
-The names, defaults and types come from ``SimConfig`` and ``NodeParams`` alone; the descriptions
-(with units) are the trailing comments of their fields, read from the source, so the ROS
-parameter descriptors and ``config/growspace.yaml`` cannot drift from the dataclasses. rcl parses
-the command line and params files; ``check_type`` and ``build`` validate what it found.
+Each parameter is declared once, on its dataclass field (``core.schema.param``: meaning, unit,
+range, choices, rules, when a change applies). The ROS parameter descriptors, the params file
+``config/growspace.yaml`` (``to_yaml``), the README's table (``python -m growspace_sim.node.params
+--markdown``) and the validation all come from those declarations. rcl parses the command line
+and params files; ``check_type`` and ``build`` validate what it found.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import argparse
 from dataclasses import dataclass
+import dataclasses
 import functools
-import inspect
-import re
+import sys
 from typing import Any
 
 import yaml
 
+from growspace_sim.core import schema
+from growspace_sim.core.config import SimConfig
+from growspace_sim.core.schema import AT_ONCE, AT_ONCE_REALTIME, AT_START, Bounds, Param, param
 from growspace_sim.ros.convert import MAX_SEED
-from growspace_sim.core import config as sim_config
-from growspace_sim.core.config import Bounds, SimConfig
 
 MODES = ('lockstep', 'realtime')
 DEFAULT_NODE_NAME = 'growspace_sim'
 MAX_RATE_HZ = 10_000.0
-FRAME_RULE = 'a frame name of letters, digits, _ and /'
-NODE_BOUNDS = {'rate_hz': Bounds(0.0, MAX_RATE_HZ, low_open=True),
-               'seed': Bounds(0, MAX_SEED, integer=True, sentinel=-1)}
-NODE_RULES = {'seed': '-1 = draw a seed at random (it is published)',
-              'frame_id': FRAME_RULE, 'image_frame_id': FRAME_RULE}
-# When a change takes effect; the node's parameter descriptors say it. SimConfig fields apply
-# at the next reset (the episode under way keeps its chamber), these at once, the rest
-# (read-only) at start-up.
-LIVE = frozenset({'rate_hz', 'auto_reset'})
-REALTIME_ONLY = frozenset({'rate_hz'})  # in lockstep, sim time per step stays as recorded
+FRAME = r'[A-Za-z0-9_/]+'
+FRAME_DOC = 'a frame name of letters, digits, _ and /'
 
 
 class ParamError(ValueError):
     """An invalid parameter; the message names it, its value and what is allowed."""
 
 
-def check_bounds(settings: Any, bounds: dict[str, Bounds]) -> None:
-    """Check a settings object's number fields against their bounds.
+def seed_param(doc: str) -> Any:
+    """The ``seed`` field of a node's settings (-1 draws one)."""
+    return param(-1, doc, bounds=Bounds(0, MAX_SEED, integer=True, sentinel=-1),
+                 rule='-1 = draw a seed at random (it is published)')
 
-    Raises:
-        ParamError: naming the first field out of bounds, its value and what is allowed.
-    """
-    for name, field_bounds in bounds.items():
-        try:
-            field_bounds.check(name, getattr(settings, name))
-        except ValueError as e:
-            raise ParamError(str(e)) from None
+
+def frame_param(default: str, doc: str) -> Any:
+    """A ``frame_id`` field of a node's settings."""
+    return param(default, doc, pattern=FRAME, pattern_doc=FRAME_DOC)
+
+
+def mode_param(doc: str) -> Any:
+    """The ``mode`` field of a node's settings."""
+    return param('lockstep', doc, choices=MODES)
+
+
+def check(settings: Any) -> None:
+    """``schema.check`` for node settings: the same one-line message, as a ``ParamError``."""
+    try:
+        schema.check(settings)
+    except ValueError as e:
+        raise ParamError(str(e)) from None
 
 
 @dataclass(frozen=True)
 class NodeParams:
     """Settings of the node itself (not of the simulated chamber), validated on construction."""
 
-    mode: str = 'lockstep'  # lockstep: one step per LightCommand; realtime: step on a timer
-    rate_hz: float = 10.0  # Hz; timer rate in realtime mode; sim time advances 1/rate_hz a step
-    seed: int = -1  # seed of the first episode; -1 = draw one at random (it is published)
-    auto_reset: bool = True  # realtime mode: start a new episode when one ends
-    frame_id: str = 'chamber'  # frame of plant state, light state and step results
-    image_frame_id: str = 'chamber_camera'  # frame of the camera images
-    record_path: str = ''  # MCAP file to record every message to; empty = no recording
+    mode: str = mode_param('lockstep: one step per LightCommand; realtime: step on a timer')
+    rate_hz: float = param(10.0, 'timer rate in realtime mode; sim time advances 1/rate_hz a '
+                           'step', unit='Hz', bounds=Bounds(0.0, MAX_RATE_HZ, low_open=True),
+                           when=AT_ONCE_REALTIME)
+    seed: int = seed_param('seed of the first episode')
+    auto_reset: bool = param(True, 'realtime mode: start a new episode when one ends',
+                             when=AT_ONCE)
+    frame_id: str = frame_param('chamber', 'frame of plant state, light state and step results')
+    image_frame_id: str = frame_param('chamber_camera', 'frame of the camera images')
+    record_path: str = param('', 'MCAP file to record every message to; empty = no recording')
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
-        check_bounds(self, NODE_BOUNDS)
-        if not isinstance(self.auto_reset, bool):
-            raise ParamError(f'auto_reset must be a bool, got {self.auto_reset!r}.')
-        for name in ('frame_id', 'image_frame_id'):
-            value = getattr(self, name)
-            if not isinstance(value, str) or not re.fullmatch(r'[A-Za-z0-9_/]+', value):
-                raise ParamError(f'{name} must be a non-empty frame name of letters, digits, '
-                                 f'_ and /, got {value!r}.')
-        if not isinstance(self.record_path, str):
-            raise ParamError(f'record_path must be a string, got {self.record_path!r}.')
+        check(self)
 
     @property
     def period_ns(self) -> int:
@@ -87,87 +84,63 @@ class NodeParams:
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One ROS parameter: its name, default, description (with unit) and constraints."""
+    """One ROS parameter of a node: its name, default and declaration.
+
+    Attributes:
+        name: The field (and parameter) name.
+        default: Its default value.
+        param: Its declaration (meaning, unit, range, choices, rules, when it applies).
+        owner: The settings dataclass it belongs to.
+        runtime: The node takes changes while it runs (sim_node; not gantry_node).
+    """
 
     name: str
     default: Any
-    description: str
-    owner: type  # SimConfig or NodeParams
-    bounds: Bounds | None = None  # numbers: the range (a ROS integer or floating-point range)
-    rules: str = ''  # what else is allowed, in words (ROS additional_constraints)
-    runtime: bool = True  # the node takes changes while it runs (sim_node; not gantry_node)
+    param: Param
+    owner: type
+    runtime: bool = True
+
+    @property
+    def description(self) -> str:
+        """Unit and meaning."""
+        return self.param.description
+
+    @property
+    def bounds(self) -> Bounds | None:
+        return self.param.bounds
+
+    @property
+    def rules(self) -> str:
+        """What is allowed beyond the type and range, in words."""
+        return self.param.constraints
 
     @property
     def when(self) -> str:
         """When a new value takes effect."""
-        if not self.runtime:
-            return 'at start-up (read-only)'
-        if self.owner is SimConfig:
-            return 'at the next reset'
-        if self.name in REALTIME_ONLY:
-            return 'at once, in realtime mode (read-only in lockstep)'
-        return 'at once' if self.name in LIVE else 'at start-up (read-only)'
+        return self.param.when if self.runtime else AT_START
 
     def read_only(self, mode: str) -> bool:
         """Whether the running node refuses changes (in ``mode``)."""
-        if not self.runtime:
-            return True
-        if self.owner is SimConfig:
-            return False
-        return self.name not in LIVE or (self.name in REALTIME_ONLY and mode != 'realtime')
+        return self.when == AT_START or (self.when == AT_ONCE_REALTIME and mode != 'realtime')
 
 
-@functools.cache
-def _field_comments(cls: type) -> dict[str, str]:
-    # 'name: type = default  # comment' lines of the dataclass body.
-    pattern = re.compile(r'^\s+(\w+):[^=]+=[^#]*#\s*(.+)$')
-    found: dict[str, str] = {}
-    try:
-        source = inspect.getsource(cls)
-    except (OSError, TypeError):  # no source installed: descriptions stay empty
-        return found
-    for line in source.splitlines():
-        match = pattern.match(line)
-        if match:
-            found[match.group(1)] = match.group(2).strip()
-    return found
-
-
-def specs_of(*classes: type, bounds: dict[str, Bounds] | None = None,
-             rules: dict[str, str] | None = None,
-             runtime: bool = True) -> tuple[ParamSpec, ...]:
-    """The parameters of some dataclasses, in class and field order (the gantry node adds its
-    own settings class to SimConfig this way).
+def specs_of(*classes: type, runtime: bool = True) -> tuple[ParamSpec, ...]:
+    """The parameters of some settings dataclasses, in class and field order (the gantry node
+    adds its own settings class to SimConfig this way).
 
     Args:
-        classes: The dataclasses; SimConfig's bounds and rules are known here.
-        bounds: The number ranges of the other classes' fields, by name.
-        rules: Other constraints of their fields, in words, by name.
+        classes: The dataclasses, their fields declared with ``core.schema.param``.
         runtime: False for a node that reads its parameters at start-up only: every one is
             read-only then.
     """
-    all_bounds = {**sim_config.BOUNDS, **(bounds or {})}
-    all_rules = {**sim_config.RULES, **(rules or {})}
-    out = []
-    for cls in classes:
-        comments = _field_comments(cls)
-        for field in dataclasses.fields(cls):
-            name = field.name
-            allowed = sim_config.choices(name) if cls is SimConfig else \
-                (MODES if name == 'mode' else ())
-            text = '; '.join(filter(None, (
-                f'one of {", ".join(allowed)}' if allowed else '',
-                'greater than 0' if name in all_bounds and all_bounds[name].low_open else '',
-                all_rules.get(name, ''))))
-            out.append(ParamSpec(name, field.default, comments.get(name, ''), cls,
-                                 all_bounds.get(name), text, runtime))
-    return tuple(out)
+    return tuple(ParamSpec(field.name, field.default, declaration, cls, runtime)
+                 for cls in classes for field, declaration in schema.declared(cls))
 
 
 @functools.cache
 def specs() -> tuple[ParamSpec, ...]:
     """Every parameter of the node: SimConfig fields first, then NodeParams, in field order."""
-    return specs_of(SimConfig, NodeParams, bounds=NODE_BOUNDS, rules=NODE_RULES)
+    return specs_of(SimConfig, NodeParams)
 
 
 def defaults() -> dict[str, Any]:
@@ -177,35 +150,13 @@ def defaults() -> dict[str, Any]:
 
 
 def check_type(spec: ParamSpec, value: Any) -> Any:
-    """Coerce a YAML value to the parameter's type as ROS would, or raise ParamError (also for
-    a number outside the parameter's range)."""
-    default = spec.default
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-        expected = 'a bool (true or false)'
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-        expected = 'an integer'
-    elif isinstance(default, float):
-        # rclpy would refuse `-p rate_hz:=20` for a double; an integer is a number too.
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-        expected = 'a number'
-    elif isinstance(default, str):
-        ok = isinstance(value, str)
-        expected = 'a string'
-    else:  # the digits tuple
-        ok = isinstance(value, (list, tuple)) and all(
-            isinstance(v, int) and not isinstance(v, bool) for v in value)
-        value = tuple(value) if ok else value
-        expected = 'a list of integers'
-    if not ok:
-        raise ParamError(f'{spec.name} must be {expected}, got {value!r}.')
-    if spec.bounds is not None:  # ROS would refuse to declare it out of its range
-        try:
-            spec.bounds.check(spec.name, value)
-        except ValueError as e:
-            raise ParamError(str(e)) from None
+    """Coerce a YAML or command-line value to the parameter's type as ROS would, or raise
+    ParamError (also for a value that its declaration does not allow)."""
+    try:
+        value = schema.coerce(spec.default, spec.name, value)
+        spec.param.check(spec.name, value)
+    except ValueError as e:
+        raise ParamError(str(e)) from None
     return value
 
 
@@ -262,9 +213,23 @@ def to_yaml(values: dict[str, Any] | None = None, node_name: str = '/**') -> str
             text = text.rsplit('\n', 1)[0]
         if isinstance(value, float):
             text = repr(value)  # 0.0-style, so ROS types it as a double
-        comment = f'  # {spec.description}' if spec.description else ''
+        comment = '; '.join(filter(None, (spec.description,
+                                          spec.param.allowed_text(spec.default))))
         # ROS 2's params-file parser cannot type an empty list, so an empty default is left as
         # a comment (unset means the same); give a non-empty list to use it.
         unset = '# ' if isinstance(value, (list, tuple)) and not value else ''
-        lines.append(f'    {unset}{spec.name}: {text}{comment}')
+        lines.append(f'    {unset}{spec.name}: {text}  # {comment}')
     return '\n'.join(lines) + '\n'
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print sim_node's parameters as a params file (the default) or as the README's table."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument('--markdown', action='store_true', help="the README's table")
+    args = parser.parse_args(argv)
+    print(schema.markdown_table(SimConfig, NodeParams) if args.markdown else to_yaml(), end='')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -21,15 +21,17 @@ the node never stops for bad input. Exit codes: 0 after SIGINT/SIGTERM, 2 for a 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 import sys
 import threading
 from typing import Any
 
-from growspace_sim.ros import convert
-from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.core.schema import Bounds, param
+from growspace_sim.node import params
 from growspace_sim.node.main import console_main, run_node
 from growspace_sim.node.transport import Transport
-from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros import convert, qos as ros_qos, types
+from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
 from growspace_sim.simulation import warm_up
 from growspace_sim.view import markers
 from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
@@ -51,12 +53,6 @@ INPUTS = (
     ('result', 'step_result', types.STEP_RESULT, STEP_INPUT_QOS),
 )
 FOXGLOVE_ONLY = (('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),)
-PARAMETERS = {  # name: (default, description)
-    'view_size': (DEFAULT_SIZE, 'width of camera/image_view [px], 16..4096'),
-    'foxglove_port': (0, 'TCP port of the Foxglove WebSocket server; 0 = no server'),
-    'foxglove_address': ('127.0.0.1', 'address the Foxglove server binds; another address '
-                         'lets anyone who reaches it watch and drive the light'),
-}
 
 
 class ViewNode:
@@ -186,54 +182,52 @@ class ViewNode:
             self.fox.close()
 
 
-def read_parameters(node: Any) -> dict[str, Any]:
-    """Declare the view's parameters on an rclpy node and return their checked values.
+@dataclass(frozen=True)
+class ViewParams:
+    """Settings of view_node (ROS parameters of the same names, read at start-up)."""
 
-    Raises:
-        ValueError: a value of the wrong type or out of range, naming it.
-    """
-    from rcl_interfaces.msg import ParameterDescriptor
+    view_size: int = param(DEFAULT_SIZE, 'width of camera/image_view', unit='px',
+                           bounds=Bounds(16, 4096, integer=True))
+    foxglove_port: int = param(0, 'TCP port of the Foxglove WebSocket server; 0 = no server',
+                               bounds=Bounds(0, 65535, integer=True))
+    foxglove_address: str = param('127.0.0.1', 'address the Foxglove server binds; another '
+                                  'address lets anyone who reaches it watch and drive the light')
 
-    values = {}
-    for name, (default, description) in PARAMETERS.items():
-        value = node.declare_parameter(
-            name, default, ParameterDescriptor(description=description, read_only=True)).value
-        if type(value) is not type(default):
-            raise ValueError(f'{name} = {value!r} must be a {type(default).__name__}.')
-        values[name] = value
-    if not 0 <= values['foxglove_port'] <= 65535:
-        raise ValueError(f'foxglove_port = {values["foxglove_port"]} must be in [0, 65535].')
-    if not 16 <= values['view_size'] <= 4096:
-        raise ValueError(f'view_size = {values["view_size"]} must be in [16, 4096] px.')
-    return values
+    def __post_init__(self) -> None:
+        params.check(self)
 
 
-def foxglove_factory(values: dict[str, Any]) -> Callable[..., Any]:
+def foxglove_factory(settings: ViewParams) -> Callable[..., Any]:
     """What builds ``view.foxglove_server.FoxgloveServer`` on the parameters' address, port."""
     from growspace_sim.view.foxglove_server import FoxgloveServer
 
     def build(*args: Any, **kwargs: Any) -> FoxgloveServer:
-        return FoxgloveServer(*args, host=values['foxglove_address'],
-                              port=values['foxglove_port'], **kwargs)
+        return FoxgloveServer(*args, host=settings.foxglove_address,
+                              port=settings.foxglove_port, **kwargs)
     return build
 
 
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the view node until SIGINT/SIGTERM (or ``stop``)."""
     def start(transport: Any) -> ViewNode:
-        values = read_parameters(transport.node)
+        values, unknown = transport.declare_parameters(
+            params.specs_of(ViewParams, runtime=False), params.check_type)
+        if unknown:
+            transport.logger.warn('params:unknown', f'ignored unknown parameter(s) {unknown}: '
+                                  'not parameters of view_node (a typo?).')
+        settings = ViewParams(**values)
         # The view re-simulates the chamber: load the compiled kernels before subscribing, or
         # the first frame's load stalls the inputs long enough to drop a burst of them.
         warm_up()
-        view = ViewNode(transport, values['view_size'],
-                        foxglove_factory(values) if values['foxglove_port'] else None)
+        view = ViewNode(transport, settings.view_size,
+                        foxglove_factory(settings) if settings.foxglove_port else None)
         where = '' if view.fox is None else \
             f', Foxglove on ws://{view.fox.host}:{view.fox.port}'
-        transport.logger.info(f'view_node {transport.resolve("~")}: {values["view_size"]} px'
+        transport.logger.info(f'view_node {transport.resolve("~")}: {settings.view_size} px'
                               + where)
         return view
     return run_node('view_node', NODE_NAME, argv, stop, start,
-                    bad_input=(ValueError, RuntimeError), automatic_overrides=False)
+                    bad_input=(ValueError, RuntimeError))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

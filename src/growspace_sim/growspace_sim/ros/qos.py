@@ -15,14 +15,13 @@ from typing import Any
 
 import yaml
 
-_HISTORIES = ('keep_last', 'keep_all')
-_RELIABILITIES = ('reliable', 'best_effort')
-_DURABILITIES = ('volatile', 'transient_local')
-_LIVELINESSES = ('automatic', 'manual_by_topic')
+from growspace_sim.core.schema import Bounds, check, param
+
 # rmw's RMW_DURATION_INFINITE {9223372036 s, 854775807 ns}: what a ROS tool reports for an
 # unset deadline, lifespan or lease when it reads the QoS back from DDS discovery.
 _INFINITE_SEC = 9223372036
 _INFINITE_NSEC = 854775807
+_DURATION = Bounds(0, 2**63 - 1, integer=True)  # ns
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,31 +31,32 @@ class QosProfile:
     Durations are in nanoseconds; 0 means unspecified, which rmw maps to infinite.
     """
 
-    history: str = 'keep_last'  # keep_last | keep_all
-    depth: int = 10  # samples kept per writer/reader with keep_last [1]
-    reliability: str = 'reliable'  # reliable | best_effort
-    durability: str = 'volatile'  # volatile | transient_local
-    deadline_ns: int = 0  # expected maximum period between samples [ns], 0 = unspecified
-    lifespan_ns: int = 0  # age after which a sample is dropped [ns], 0 = unspecified
-    liveliness: str = 'automatic'  # automatic | manual_by_topic
-    liveliness_lease_duration_ns: int = 0  # [ns], 0 = unspecified
-    avoid_ros_namespace_conventions: bool = False  # true: no rt/ prefix on the DDS topic
+    history: str = param('keep_last', 'samples kept', choices=('keep_last', 'keep_all'))
+    depth: int = param(10, 'samples kept per writer/reader with keep_last',
+                       bounds=Bounds(0, 2**31 - 1, integer=True), rule='at least 1 for keep_last')
+    reliability: str = param('reliable', 'delivery', choices=('reliable', 'best_effort'))
+    durability: str = param('volatile', 'late joiners', choices=('volatile', 'transient_local'))
+    deadline_ns: int = param(0, 'expected maximum period between samples', unit='ns',
+                             bounds=_DURATION, rule='0 = unspecified')
+    lifespan_ns: int = param(0, 'age after which a sample is dropped', unit='ns',
+                             bounds=_DURATION, rule='0 = unspecified')
+    liveliness: str = param('automatic', 'liveliness', choices=('automatic', 'manual_by_topic'))
+    liveliness_lease_duration_ns: int = param(0, 'liveliness lease', unit='ns',
+                                              bounds=_DURATION, rule='0 = unspecified')
+    avoid_ros_namespace_conventions: bool = param(False, 'true: no rt/ prefix on the DDS topic')
 
     def __post_init__(self) -> None:
         """Validate every field.
 
         Raises:
-            ValueError: A field has a value rmw would reject.
+            ValueError: A field has a value rmw would reject, named with its value.
         """
-        for name, allowed in (('history', _HISTORIES), ('reliability', _RELIABILITIES),
-                              ('durability', _DURABILITIES), ('liveliness', _LIVELINESSES)):
-            if getattr(self, name) not in allowed:
-                raise ValueError(f'QoS {name} ({getattr(self, name)!r}) must be one of {allowed}')
-        if self.history == 'keep_last' and not 1 <= self.depth <= 2**31 - 1:
-            raise ValueError(f'QoS depth ({self.depth}) must be in [1, 2**31 - 1] for keep_last')
-        for name in ('deadline_ns', 'lifespan_ns', 'liveliness_lease_duration_ns'):
-            if getattr(self, name) < 0:
-                raise ValueError(f'QoS {name} ({getattr(self, name)}) must not be negative')
+        try:
+            check(self)
+            if self.history == 'keep_last' and self.depth < 1:
+                raise ValueError(f'depth must be at least 1 for keep_last, got {self.depth}.')
+        except ValueError as e:
+            raise ValueError(f'QoS {e}') from None
 
     def with_depth(self, depth: int) -> QosProfile:
         """Return a copy with another keep_last depth (like rclpy's `create_publisher(T, n, d)`).

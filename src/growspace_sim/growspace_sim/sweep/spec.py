@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 from collections.abc import Mapping
 import importlib.util
-import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -16,6 +15,7 @@ import gymnasium as gym
 import yaml
 
 from growspace_sim.agents import evaluate
+from growspace_sim.core.schema import Bounds
 
 
 BASELINES = evaluate.AGENTS
@@ -201,16 +201,19 @@ def _names(value: Any, where: str, allowed: tuple[str, ...]) -> list[str]:
 
 
 def _integer(value: Any, where: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise SpecError(f'{where} must be an integer >= {minimum}; got {value!r}.')
-    return value
+    return _within(Bounds(minimum, integer=True), where, value)
 
 
 def _positive(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or value <= 0:
-        raise SpecError(f'{where} must be a number > 0; got {value!r}.')
-    return float(value)
+    return float(_within(Bounds(0.0, low_open=True), where, value))
+
+
+def _within(bounds: Bounds, where: str, value: Any) -> Any:
+    try:
+        bounds.check(where, value)
+    except ValueError as error:
+        raise SpecError(str(error)) from None
+    return value
 
 
 def _mapping(value: Any, where: str) -> dict:
