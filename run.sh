@@ -103,7 +103,7 @@ case "$cmd" in
   bench) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.tools.bench "$@" ;;
   eval) setup "${MAIN[@]}"
-        exec .venv/bin/python -m growspace_sim.agents.evaluate "$@" ;;
+        exec .venv/bin/python -m growspace_sim.tools.evaluate "$@" ;;
   sweep) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)

@@ -53,7 +53,6 @@ class Client:
     """Lockstep client: waits for the StepResult and the Image of every request."""
 
     def __init__(self) -> None:
-        from growspace_sim.ros import convert
         from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
         from growspace_sim.node.rclpy_transport import RclpyTransport
         from growspace_sim.ros import types
@@ -66,7 +65,7 @@ class Client:
         self.images = 0
         t.subscribe(types.STEP_RESULT, 'step_result', OBSERVATION_QOS,
                     lambda msg, _: setattr(self, 'result', msg))
-        t.subscribe(convert.IMAGE, 'camera/image_raw', OBSERVATION_QOS, self._image)
+        t.subscribe(types.IMAGE, 'camera/image_raw', OBSERVATION_QOS, self._image)
         deadline = time.monotonic() + 20.0
         topics = ('light/command', 'reset', 'step_result', 'camera/image_raw')
         while not all(map(t.matched, topics)):

@@ -97,7 +97,7 @@ def run_runner(cfg: SimConfig, plan: np.ndarray, recorder: object | None) -> int
     runner = EpisodeRunner(cfg, recorder)
     steps = 0
     for episode, row in enumerate(plan):
-        runner.reset(episode)
+        runner.reset(seed=episode)
         for action in row:
             runner.step(int(action))
             steps += 1

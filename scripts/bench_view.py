@@ -94,7 +94,7 @@ def one_episode(messages: list, size: int) -> tuple[float, int, int]:
         array = markers.marker_array(frame)
         size_bytes += len(types.serialize(array, markers.MARKER_ARRAY))
         image = convert.image_msg(renderer.render(frame), frame.stamp_ns, 'chamber_camera')
-        size_bytes += len(types.serialize(image, convert.IMAGE))
+        size_bytes += len(types.serialize(image, types.IMAGE))
         frames += 1
     return time.process_time() - start, frames, size_bytes
 

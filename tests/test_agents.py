@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 import os
 
 import gymnasium as gym
@@ -11,8 +12,8 @@ import pytest
 
 from growspace_sim.tools import bench
 
-from growspace_sim.agents import evaluate
-from growspace_sim.agents.reference import OracleAgent, RandomAgent, run_episode
+from growspace_sim.tools import evaluate
+from growspace_sim.agents import OracleAgent, play_episodes, RandomAgent
 from growspace_sim.envs.registration import env_id
 
 
@@ -29,8 +30,8 @@ def test_random_agent_is_seeded():
 def test_oracle_returns_valid_actions_and_beats_random_on_average(challenge):
     env = gym.make(env_id(challenge, 'hard'))
     seeds = range(100, 106)
-    oracle = [run_episode(env, OracleAgent(), s)[0] for s in seeds]
-    random = [run_episode(env, RandomAgent(env.action_space, 0), s)[0] for s in seeds]
+    oracle = play_episodes(env, OracleAgent(), seeds).returns
+    random = play_episodes(env, RandomAgent(env.action_space, 0), seeds).returns
     assert np.mean(oracle) > np.mean(random)
 
 
@@ -64,3 +65,27 @@ def test_bench_script_prints_a_table_and_restores_the_cpu_set(capsys):
     out = capsys.readouterr().out
     assert '| control |' in out and 'peak RSS' in out
     assert os.sched_getaffinity(0) == cpus
+
+
+def test_the_readme_evaluation_table_reproduces_exactly(capsys):
+    # The README's table is `growspace-eval --episodes 100`, printed by the one evaluation stack.
+    readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
+    assert evaluate.main(['--episodes', '100']) == 0
+    table = capsys.readouterr().out.split('\n\n', 1)[1].strip()
+    assert table in readme
+
+
+def test_a_challenge_without_an_oracle_is_evaluated_without_one():
+    from growspace_sim.core.task import Layout, register, Task, unregister
+    from growspace_sim.envs.registration import register_envs
+
+    task = register(Task(name='no_oracle', env_name='NoOracle', settings=('easy',),
+                         layout=lambda cfg, rng: Layout((0.42,), complex(0.42, 0.7), 0.42),
+                         score=lambda state, cfg: (0.5, np.array([0.5]), False)))
+    try:
+        register_envs()
+        row = evaluate.evaluate('no_oracle', 'easy', episodes=2)
+        assert row.random_mean == 25.0 and row.oracle_mean != row.oracle_mean  # NaN: none
+        assert '- (no oracle)' in evaluate.markdown([row])
+    finally:
+        unregister(task.name)

@@ -19,7 +19,7 @@ from mcap.stream_reader import breakup_chunk, StreamReader
 import pytest
 
 from growspace_sim import recording
-from growspace_sim.agents.reference import OracleAgent
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
@@ -36,7 +36,7 @@ def intact(tmp_path_factory) -> Path:
     with McapRecorder(path, chunk_size=CHUNK_SIZE) as rec:
         runner = EpisodeRunner(SimConfig(challenge='control'), rec)
         for seed in (11, 12, 13):
-            runner.run_episode(OracleAgent().act, seed)
+            play_episodes(runner, OracleAgent(), [seed])
     return path
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from growspace_sim.agents.reference import OracleAgent
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder
@@ -19,7 +19,7 @@ def record(path: Path, challenge: str, seeds=(4, 5)) -> None:
     with McapRecorder(path) as rec:
         runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
         for seed in seeds:
-            runner.run_episode(OracleAgent().act, seed)
+            play_episodes(runner, OracleAgent(), [seed])
 
 
 def shifted_copy(src: Path, dst: Path, step_id: int, dx: float) -> None:

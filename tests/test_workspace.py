@@ -79,3 +79,22 @@ def test_every_interface_parses_with_rosbags() -> None:
         short = name.rsplit('/', 1)[1]
         parsed = get_types_from_msg(text, f'growspace_msgs/msg/{short}')
         assert parsed[f'growspace_msgs/msg/{short}'][1], f'{name} has no fields'
+
+
+def test_the_loopback_rule_applies_outside_a_sourced_workspace() -> None:
+    # The tests' conftest confines ROS to loopback first thing; with no AMENT_PREFIX_PATH
+    # (a plain `PYTHONPATH=src/growspace_sim pytest`) ament's index cannot be searched.
+    import os
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ('AMENT_PREFIX_PATH', 'FASTRTPS_DEFAULT_PROFILES_FILE',
+                        'ROS_AUTOMATIC_DISCOVERY_RANGE')}
+    env['PYTHONPATH'] = str(ROOT / 'src' / 'growspace_sim')
+    code = ('from growspace_sim.ros import loopback\n'
+            'env = loopback.confine({})\n'
+            'import pathlib; print(env[loopback.RANGE_VAR], '
+            'pathlib.Path(env[loopback.PROFILE_VAR]).is_file())\n')
+    out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ['LOCALHOST', 'True']

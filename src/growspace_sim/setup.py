@@ -28,7 +28,7 @@ setup(
     python_requires='>=3.11',
     entry_points={
         'console_scripts': [
-            'growspace-eval = growspace_sim.agents.evaluate:main',
+            'growspace-eval = growspace_sim.tools.evaluate:main',
             'growspace-train = growspace_sim.learn.train:main',
             'growspace-compare = growspace_sim.learn.evaluate_policies:main',
             'growspace-sweep = growspace_sim.sweep:main',

@@ -46,7 +46,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
 from growspace_sim.node.chamber_node import EPISODE_OVER, Recorder, step_id_error
 from growspace_sim.ros.interface import (
-    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, STRING, Topic)
+    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, Topic)
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation
@@ -64,7 +64,7 @@ INPUTS = (
     Topic('estop', 'gantry/estop', EMPTY, COMMAND_QOS),
 )
 OUTPUTS = (
-    Topic('config', 'chamber/config', STRING, ros_qos.LATCHED),
+    Topic('config', 'chamber/config', types.STRING, ros_qos.LATCHED),
     Topic('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
     Topic('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
     Topic('status', 'gantry/status', DIAGNOSTICS, OBSERVATION_QOS),
@@ -123,7 +123,7 @@ class GantryNode:
         self._start_recording(seed)
         self.sim.reset(seed=seed)
         self.seed = self.sim.seed
-        self._publish('config', types.new(STRING, data=self._config_payload(seed)))
+        self._publish('config', types.new(types.STRING, data=self._config_payload(seed)))
         # The machine does not move at start-up: the first command or reset moves it.
 
     # --- inputs ----------------------------------------------------------------------------
@@ -176,7 +176,7 @@ class GantryNode:
             return
         self.sim, self.cfg, self.seed = sim, cfg, sim.seed
         self.reset_id, self.last_step_id, self.steps = reset_id, 0, 0
-        self._publish('config', types.new(STRING, data=self._config_payload(seed)))
+        self._publish('config', types.new(types.STRING, data=self._config_payload(seed)))
         self._move(target, 0)
 
     def estop(self, source: str) -> str:

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 from growspace_sim.ros import convert
-from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 from growspace_sim.ros import qos as ros_qos, types
 
 RESULT, IMAGE, PLANT, LIGHT, CONFIG = 'step_result', 'camera/image_raw', 'plant/state', \
@@ -74,14 +74,14 @@ class ChamberLink:
         self._reset = transport.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
         transport.subscribe(types.STEP_RESULT, RESULT, OBSERVATION_QOS, self._on_result)
         if with_image:
-            transport.subscribe(convert.IMAGE, IMAGE, OBSERVATION_QOS,
+            transport.subscribe(types.IMAGE, IMAGE, OBSERVATION_QOS,
                                 self._frame_callback(IMAGE))
         if with_state:
             transport.subscribe(types.PLANT_STATE, PLANT, OBSERVATION_QOS,
                                 self._frame_callback(PLANT))
             transport.subscribe(types.LIGHT_COMMAND, LIGHT, OBSERVATION_QOS,
                                 self._frame_callback(LIGHT))
-        transport.subscribe(STRING, CONFIG, ros_qos.LATCHED, self._on_config)
+        transport.subscribe(types.STRING, CONFIG, ros_qos.LATCHED, self._on_config)
 
     @property
     def inputs(self) -> tuple[str, ...]:

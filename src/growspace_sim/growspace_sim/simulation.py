@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from growspace_sim import digits as digit_data
-from growspace_sim.core import light as lights
+from growspace_sim.core import light as lights, task as tasks
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.render import Renderer
@@ -122,8 +122,9 @@ def warm_up() -> None:
     subprocesses) load the cache instead of all compiling it at the same time.
     """
     digit = np.full((28, 28), 255, np.uint8)  # any target: no MNIST needed
-    for challenge, overrides in (('control', {}), ('shape', {'max_branching': 1})):
-        cfg = SimConfig(challenge=challenge, episode_length=8, **overrides)
+    for spotlight, max_branching in ((False, 8), (True, 1)):
+        task = next(t for t in tasks.all_tasks() if t.spotlight == spotlight)
+        cfg = SimConfig(challenge=task.name, episode_length=8, max_branching=max_branching)
         chamber, renderer = Chamber(cfg), Renderer(cfg)
         chamber.reset(np.random.default_rng(0), None if cfg.task.digits is None else digit)
         renderer.reset(chamber)

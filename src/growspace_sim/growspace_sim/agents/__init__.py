@@ -1,7 +1,8 @@
 """Agents and their evaluation: the random agent and the challenges' oracles (``reference``),
-and seeded episodes played by any of them (``evaluate``)."""
+and the one episode loop that plays any of them on seeded episodes (``evaluation``)."""
 
-from growspace_sim.agents.reference import (
-    Agent, OracleAgent, play_episodes, RandomAgent, run_episode)
+from growspace_sim.agents.evaluation import Episodes, evaluate, make_agent, play_episodes
+from growspace_sim.agents.reference import Agent, OracleAgent, RandomAgent
 
-__all__ = ['Agent', 'OracleAgent', 'RandomAgent', 'play_episodes', 'run_episode']
+__all__ = ['Agent', 'Episodes', 'OracleAgent', 'RandomAgent', 'evaluate', 'make_agent',
+           'play_episodes']

@@ -9,7 +9,6 @@ act through the discrete action space, as an agent would.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any, Protocol
 
 import gymnasium as gym
@@ -62,44 +61,3 @@ class OracleAgent:
                 raise ValueError(f'challenge {task.name!r} has no oracle (Task.oracle is None).')
             oracle = self._oracles[task] = task.oracle()
         return oracle.act(chamber)
-
-
-def run_episode(env: gym.Env, agent: Agent, seed: int) -> tuple[float, dict]:
-    """One seeded episode; returns the undiscounted return and the last info."""
-    observation, info = env.reset(seed=seed)
-    total, done = 0.0, False
-    while not done:
-        observation, reward, terminated, truncated, info = env.step(
-            agent.act(observation, env))
-        total += float(reward)
-        done = terminated or truncated
-    return total, info
-
-
-def play_episodes(env: gym.Env, agent: Agent,
-                  seeds: Sequence[int]) -> tuple[np.ndarray, list[dict]]:
-    """Seeded episodes; returns per-step rewards and each episode's last info.
-
-    Args:
-        env: The environment, reset with each seed in turn.
-        agent: Acts on every observation.
-        seeds: One episode per seed.
-
-    Returns:
-        Rewards, shape (episodes, steps) float64, zero-padded past an early termination, and
-        the last ``info`` of every episode.
-    """
-    rows, infos = [], []
-    for seed in seeds:
-        observation, info = env.reset(seed=seed)
-        rewards, done = [], False
-        while not done:
-            observation, reward, terminated, truncated, info = env.step(
-                agent.act(observation, env))
-            rewards.append(float(reward))
-            done = terminated or truncated
-        rows.append(rewards)
-        infos.append(info)
-    width = max((len(r) for r in rows), default=0)
-    padded = np.array([r + [0.0] * (width - len(r)) for r in rows], np.float64)
-    return padded.reshape(len(rows), width), infos

@@ -17,6 +17,12 @@ from growspace_sim.core.errors import CommandError
 
 BEAM_ACTIONS = ('left', 'right', 'stay', 'wider', 'narrower')
 SPOT_ACTIONS = ('left', 'right', 'up', 'down', 'bigger', 'smaller', 'stay')
+# What each discrete action changes, and by how many light steps (None: nothing).
+MOVES = {
+    'left': ('x', -1.0), 'right': ('x', 1.0), 'up': ('z', 1.0), 'down': ('z', -1.0),
+    'wider': ('width', 1.0), 'narrower': ('width', -1.0),
+    'bigger': ('radius', 0.5), 'smaller': ('radius', -0.5), 'stay': None,
+}
 
 
 @dataclass
@@ -67,24 +73,10 @@ def apply_discrete(light: Light, action: int, cfg: SimConfig) -> None:
             or not 0 <= action < len(names):
         raise CommandError('action', action,
                            f'an int in [0, {len(names) - 1}] ({", ".join(names)})')
-    step = cfg.light_step_m
-    name = names[action]
-    if name == 'left':
-        light.x -= step
-    elif name == 'right':
-        light.x += step
-    elif name == 'up':
-        light.z += step
-    elif name == 'down':
-        light.z -= step
-    elif name == 'wider':
-        light.width += step
-    elif name == 'narrower':
-        light.width -= step
-    elif name == 'bigger':
-        light.radius += 0.5 * step
-    elif name == 'smaller':
-        light.radius -= 0.5 * step
+    move = MOVES[names[action]]
+    if move is not None:
+        field, light_steps = move
+        setattr(light, field, getattr(light, field) + light_steps * cfg.light_step_m)
     clamp(light, cfg)
 
 

@@ -126,6 +126,13 @@ def _load(name: str) -> Task:
     return task
 
 
+def known(name: str) -> bool:
+    """Whether ``name`` is registered or was loaded already: what a message from the network
+    may name (loading ``module:attribute`` imports code, which only the node's operator may
+    ask for, at start-up)."""
+    return name in _REGISTRY or name in _LOADED
+
+
 def names() -> tuple[str, ...]:
     """The registered challenge names, in registration order."""
     return tuple(_REGISTRY)

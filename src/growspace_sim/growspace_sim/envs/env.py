@@ -196,5 +196,7 @@ class DigitCurriculum(gym.Wrapper):
 
 
 def make_curriculum(episodes_per_stage: int = 100, **kwargs: Any) -> gym.Env:
-    """The shape environment wrapped in ``DigitCurriculum`` (registered entry point)."""
-    return DigitCurriculum(GrowSpaceEnv('shape', **kwargs), episodes_per_stage)
+    """An environment of a challenge with shape targets wrapped in ``DigitCurriculum`` (the
+    entry point its task registers, e.g. ``GrowSpace/Shape-Curriculum-v0`` with ``challenge``
+    ``shape``)."""
+    return DigitCurriculum(GrowSpaceEnv(**kwargs), episodes_per_stage)

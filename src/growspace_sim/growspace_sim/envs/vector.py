@@ -274,6 +274,7 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
 
 def make_curriculum_vector(num_envs: int = 1, episodes_per_stage: int = 100,
                            **kwargs: Any) -> GrowSpaceVectorEnv:
-    """The vector entry point of ``GrowSpace/Shape-Curriculum-v0``: shape chambers, each with
-    the curriculum of ``DigitCurriculum`` (``envs.make_curriculum``)."""
-    return GrowSpaceVectorEnv(num_envs, 'shape', episodes_per_stage=episodes_per_stage, **kwargs)
+    """The vector entry point of a digit curriculum (``GrowSpace/Shape-Curriculum-v0``): the
+    challenge's chambers (a ``challenge`` keyword of its registration), each with the
+    curriculum of ``DigitCurriculum`` (``envs.env.make_curriculum``)."""
+    return GrowSpaceVectorEnv(num_envs, episodes_per_stage=episodes_per_stage, **kwargs)

@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim.agents.reference import OracleAgent, RandomAgent, play_episodes
+from growspace_sim.agents import evaluation
 
 EVAL_ENV = {'GrowSpace/Shape-Curriculum-v0': 'GrowSpace/Shape-AllDigits-v0'}
 COLUMNS = ('case', 'env', 'agent', 'runs', 'episodes', 'steps', 'mean', 'se')
@@ -71,36 +71,35 @@ def case_name(env_id: str) -> str:
     return f'{by_title.get(challenge, challenge.lower())}/{setting.lower()}'
 
 
-def play(env: gym.Env, agent, seeds: list[int]) -> np.ndarray:
-    """Per-step rewards, shape (episodes, steps) (zero-padded past an early termination)."""
-    return play_episodes(env, agent, seeds)[0]
-
-
 def evaluate_env(env_id: str, runs: list[str], episodes: int, seed: int = 10_000,
                  deterministic: bool = True, baselines: bool = True) -> dict[str, dict]:
     """Random, oracle and each run on ``episodes`` seeded episodes of ``env_id``.
 
+    Every agent plays the same seeds through ``agents.evaluation.evaluate``, as in
+    ``growspace-eval``; runs with the same label (seeds of one algorithm) are pooled.
+
     Returns ``{label: {'rewards': (n, 50) array per run, 'steps': [...]}}``; random and
     oracle have one entry each.
     """
+    agents: dict[str, evaluation.AgentFactory] = {}
+    if baselines:
+        agents.update({name: lambda env, name=name: evaluation.make_agent(name, env, seed)
+                       for name in BASELINE_AGENTS})
+    infos = {run: json.loads((Path(run) / 'run.json').read_text()) for run in runs}
     if runs:  # random and oracle alone need no torch
         import torch  # noqa: PLC0415
 
         from growspace_sim.learn.train import load_model  # noqa: PLC0415
         torch.set_num_threads(1)
-    env = gym.make(env_id)
-    seeds = list(range(seed, seed + episodes))
+        agents.update({run: lambda env, run=run: PolicyAgent(load_model(run, device='cpu'),
+                                                             deterministic) for run in runs})
+    played = evaluation.evaluate(env_id, agents, range(seed, seed + episodes))
     results: dict[str, dict] = defaultdict(lambda: {'rewards': [], 'steps': []})
-    if baselines:
-        results['random']['rewards'].append(play(env, RandomAgent(env.action_space, seed), seeds))
-        results['oracle']['rewards'].append(play(env, OracleAgent(), seeds))
-    for run in runs:
-        info = json.loads((Path(run) / 'run.json').read_text())
-        label = run_label(info)
-        agent = PolicyAgent(load_model(run, device='cpu'), deterministic)
-        results[label]['rewards'].append(play(env, agent, seeds))
-        results[label]['steps'].append(info['steps'])
-    env.close()
+    for key, episodes_played in played.items():
+        entry = results[run_label(infos[key]) if key in infos else key]
+        entry['rewards'].append(episodes_played.rewards)
+        if key in infos:
+            entry['steps'].append(infos[key]['steps'])
     return dict(results)
 
 
@@ -121,8 +120,8 @@ def rows_for(env_id: str, results: dict[str, dict]) -> list[Row]:
     """
     rows = []
     for label, entry in results.items():
-        returns = np.mean([r.sum(axis=1) for r in entry['rewards']], axis=0)
-        se = returns.std(ddof=1) / math.sqrt(returns.size) if returns.size > 1 else float('nan')
+        returns = np.mean([evaluation.episode_returns(r) for r in entry['rewards']], axis=0)
+        se = evaluation.mean_se(returns)[1]
         steps = int(np.mean(entry['steps'])) if entry['steps'] else 0
         rows.append(Row(case_name(env_id), env_id, label, len(entry['steps']), int(returns.size),
                         steps, float(returns.mean()), float(se)))

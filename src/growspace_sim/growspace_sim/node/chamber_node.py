@@ -24,11 +24,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from growspace_sim.ros import convert
+from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
 from growspace_sim.ros.interface import (
-    COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, STRING, config_json,
+    COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, config_json,
     digit_fingerprint, growspace_metadata)
 from growspace_sim.node.params import NodeParams, ParamError, as_values, build
 from growspace_sim.node.transport import Transport
@@ -38,7 +39,6 @@ from growspace_sim.simulation import Simulation
 __all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'OBSERVATION_QOS', 'OUTPUTS',
            'Recorder']
 
-RESET_SRV = 'growspace_msgs/srv/Reset'
 EPISODE_OVER = 'episode over; send a reset'
 
 
@@ -129,7 +129,7 @@ class ChamberNode:
         handlers = {'reset': self.on_reset, 'command': self.on_command}
         for key, topic, typename, qos in INPUTS:
             transport.subscribe(typename, topic, qos, handlers[key])
-        transport.serve(RESET_SRV, 'reset', self.on_reset_service)
+        transport.serve(types.RESET, 'reset', self.on_reset_service)
         self._timer = transport.create_timer(1.0 / self.params.rate_hz, self.tick) \
             if self.params.mode == 'realtime' else None
         seed = self.params.seed if self.params.seed >= 0 else secrets.randbits(63)
@@ -202,6 +202,10 @@ class ChamberNode:
         Returns:
             None if accepted, else the reason (names the parameter, value and what is allowed).
         """
+        challenge = values.get('challenge')
+        if isinstance(challenge, str) and not tasks.known(challenge):  # imports only at start-up
+            return (f'challenge must be one of {tasks.names()} (a module:attribute challenge is '
+                    f'loaded at start-up only), got {challenge!r}.')
         current = as_values(self.pending_cfg or self.cfg, self.params)
         current.update(values)
         try:
@@ -304,7 +308,7 @@ class ChamberNode:
                            episode=self.sim.episode, digit=self.sim.digit)
 
     def _publish_config(self, seed: int | None) -> None:
-        self._publish('config', types.new(STRING, data=self.config_payload(seed)))
+        self._publish('config', types.new(types.STRING, data=self.config_payload(seed)))
 
     def _publish_observation(self, step_id: int, info: str) -> None:
         stamp, p = self.sim_time_ns, self.params

@@ -11,14 +11,14 @@ and ``docs/recording.md``).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 import dataclasses
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from growspace_sim.ros import convert
-from growspace_sim.core.chamber import Chamber, StepOutcome
+from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
@@ -28,16 +28,14 @@ from growspace_sim.ros import types
 
 DEFAULT_NAMESPACE = '/growspace'
 
-Policy = Callable[[np.ndarray, Any], Any]  # (observation, runner) -> discrete action
-
 
 class EpisodeRunner:
     """A lockstep client of an in-process ``ChamberNode``.
 
     The node starts at the first ``reset`` (its automatic first episode, with that seed, as
-    ``sim_node -p seed:=...`` does); every later ``reset`` is a ResetRequest. It quacks enough
-    like a Gymnasium env (``unwrapped``, ``chamber``, ``continuous``) for
-    ``agents.OracleAgent.act(observation, runner)``.
+    ``sim_node -p seed:=...`` does); every later ``reset`` is a ResetRequest. It has Gymnasium's
+    ``reset``/``step`` and enough of an env (``unwrapped``, ``chamber``, ``continuous``) for
+    ``agents.play_episodes`` to play it with any agent, the oracle included.
 
     Args:
         cfg: The configuration of the first episode.
@@ -65,7 +63,6 @@ class EpisodeRunner:
         self.node: ChamberNode | None = None
         self.observation: np.ndarray | None = None
         self.result: Any = None  # the latest StepResult
-        self.episode_return = 0.0
         self._step_id = 0
         self._reset_id = 0
         self._image_topic = self.transport.resolve('camera/image_raw')
@@ -86,6 +83,11 @@ class EpisodeRunner:
         return len(SPOT_ACTIONS if cfg.uses_spotlight else BEAM_ACTIONS)
 
     @property
+    def action_space(self) -> gym.spaces.Discrete:
+        """The challenge's discrete actions (the runner sends discrete LightCommands)."""
+        return gym.spaces.Discrete(self.n_actions)
+
+    @property
     def recording_error(self) -> str | None:
         """Why the node stopped recording, or None."""
         return None if self.node is None else self.node.recording_error
@@ -97,22 +99,27 @@ class EpisodeRunner:
         return self.node
 
     # ------------------------------------------------------------------ driving
-    def reset(self, seed: int | None = None, challenge: str | None = None,
-              setting: str | None = None) -> StepOutcome:
-        """Start an episode: the node's first one, then by ResetRequest.
+    def reset(self, *, seed: int | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode: the node's first one, then by ResetRequest (Gymnasium's API).
 
         Args:
             seed: Restart the random stream from this seed; None continues it (for the node's
                 first episode: a random seed, which the recording keeps).
-            challenge: Switch to this challenge; None keeps the current one.
-            setting: Switch to this setting; None keeps the current one.
+            options: ``challenge`` and ``setting`` to switch to (absent: keep the current).
 
         Returns:
-            The reward of the initial state.
+            The observation and info (``step``, ``success``, ``plant_rewards``) of the start.
 
         Raises:
-            ValueError: The node rejected the reset (the message says why).
+            ValueError: The node rejected the reset (the message says why), or an unknown
+                option.
         """
+        options = dict(options or {})
+        unknown = sorted(set(options) - {'challenge', 'setting'})
+        if unknown:
+            raise ValueError(f'reset options {unknown} are unknown; allowed: challenge, setting.')
+        challenge, setting = options.get('challenge'), options.get('setting')
         if self.node is None:
             changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
             params = dataclasses.replace(self.params, seed=-1 if seed is None else seed)
@@ -126,17 +133,17 @@ class EpisodeRunner:
                 has_seed=seed is not None, seed=seed or 0, challenge=challenge or '',
                 setting=setting or ''))
         self._step_id = 0
-        self.episode_return = 0.0
-        return self.node.outcome
+        return self.observation, self._info()
 
-    def step(self, action: int) -> StepOutcome:
+    def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Send one discrete action as a lockstep LightCommand; the node steps once.
 
         Args:
             action: Index into the challenge's discrete actions.
 
         Returns:
-            The step's outcome.
+            Gymnasium's (observation, reward, terminated, truncated, info), from the node's
+            messages.
 
         Raises:
             ValueError: The node rejected the command without stepping (the message says why).
@@ -144,31 +151,9 @@ class EpisodeRunner:
         self._step_id += 1
         self._send('light/command', convert.discrete_command_msg(
             int(action), self._step_id, self._stamp_ns(), self._node.params.frame_id))
-        outcome = self._node.outcome
-        self.episode_return += outcome.reward
-        return outcome
-
-    def run_episode(self, policy: Policy, seed: int | None = None, *,
-                    challenge: str | None = None,
-                    setting: str | None = None) -> tuple[float, int]:
-        """Reset, then step with ``policy`` until the episode is truncated.
-
-        Args:
-            policy: ``(observation, runner) -> action``, e.g. ``OracleAgent().act``.
-            seed: The episode seed (None continues the stream).
-            challenge: Switch challenge at this reset.
-            setting: Switch setting at this reset.
-
-        Returns:
-            (undiscounted return of the steps, number of steps).
-        """
-        self.reset(seed, challenge, setting)
-        steps = 0
-        while True:
-            outcome = self.step(policy(self.observation, self))
-            steps += 1
-            if outcome.truncated:
-                return self.episode_return, steps
+        result = self.result
+        return self.observation, float(result.reward), bool(result.terminated), \
+            bool(result.truncated), self._info()
 
     def close(self) -> None:
         """Close the node, which finishes the recording. Idempotent."""
@@ -193,6 +178,11 @@ class EpisodeRunner:
             # Rejected (the node answered without stepping or resetting, saying why).
             raise ValueError(f'{topic}: {result.info if result is not previous else "no answer"}')
         self._answered()
+
+    def _info(self) -> dict[str, Any]:
+        result = self.result
+        return {'step': int(result.step), 'success': bool(result.success),
+                'plant_rewards': np.asarray(result.plant_rewards, np.float64)}
 
     def _answered(self) -> None:
         self.result = self.transport.latest[self._result_topic]

@@ -31,7 +31,7 @@ from growspace_sim.node import params
 from growspace_sim.node.main import console_main, run_node
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert, qos as ros_qos, types
-from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS, STRING
+from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 from growspace_sim.simulation import warm_up
 from growspace_sim.view import markers
 from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
@@ -40,19 +40,18 @@ from growspace_sim.view.scene import Scene, ViewInputError
 NODE_NAME = 'growspace_view'
 MARKERS_TOPIC = 'plant/markers'
 IMAGE_TOPIC = 'camera/image_view'
-RESET_SRV = 'growspace_msgs/srv/Reset'
 RESET_WAIT_S = 5.0  # how long a Foxglove reset call waits for the chamber's answer [s]
 # The view re-simulates from every light/state in turn, so a burst it is slow to read must wait
 # in its queue rather than be dropped: 100 messages, 2 s of a 50 Hz chamber.
 STEP_INPUT_QOS = ros_qos.QosProfile(depth=100)
 # (key, topic, type, QoS) of what the view reads; the image is forwarded to Foxglove only.
 INPUTS = (
-    ('config', 'chamber/config', STRING, ros_qos.LATCHED),
+    ('config', 'chamber/config', types.STRING, ros_qos.LATCHED),
     ('plant', 'plant/state', types.PLANT_STATE, STEP_INPUT_QOS),
     ('light', 'light/state', types.LIGHT_COMMAND, STEP_INPUT_QOS),
     ('result', 'step_result', types.STEP_RESULT, STEP_INPUT_QOS),
 )
-FOXGLOVE_ONLY = (('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),)
+FOXGLOVE_ONLY = (('image', 'camera/image_raw', types.IMAGE, OBSERVATION_QOS),)
 
 
 class ViewNode:
@@ -78,7 +77,7 @@ class ViewNode:
         self._note = None
         self._publish_markers = transport.publisher(markers.MARKER_ARRAY, MARKERS_TOPIC,
                                                     OBSERVATION_QOS)
-        self._publish_image = transport.publisher(convert.IMAGE, IMAGE_TOPIC, OBSERVATION_QOS)
+        self._publish_image = transport.publisher(types.IMAGE, IMAGE_TOPIC, OBSERVATION_QOS)
         self._reset_done = threading.Condition()
         self._resets: dict[int, str] = {}  # reset_id -> info of its step_result
         self._next_reset_id = 1 << 40  # far from the ids an RL client counts up from 0
@@ -90,10 +89,10 @@ class ViewNode:
             self._publish_lock = threading.Lock()
             outputs = [(transport.resolve(t), n) for _, t, n, _ in INPUTS + FOXGLOVE_ONLY]
             outputs += [(transport.resolve(MARKERS_TOPIC), markers.MARKER_ARRAY),
-                        (transport.resolve(IMAGE_TOPIC), convert.IMAGE)]
+                        (transport.resolve(IMAGE_TOPIC), types.IMAGE)]
             inputs = {transport.resolve('light/command'): types.LIGHT_COMMAND,
                       transport.resolve('reset'): types.RESET_REQUEST}
-            services = {transport.resolve('reset'): (RESET_SRV, self.reset_service)}
+            services = {transport.resolve('reset'): (types.RESET, self.reset_service)}
             self.fox = foxglove(outputs, inputs, self.on_client_message, services=services)
         handlers = {'config': lambda msg: self.scene.on_config(msg.data),
                     'plant': self.scene.on_plant, 'light': self.scene.on_light,
@@ -174,7 +173,7 @@ class ViewNode:
         else:
             message = info or ''
         ok = done and not info
-        return types.new(f'{RESET_SRV}_Response', success=ok, message=message,
+        return types.new(types.RESET_SRV_RESPONSE, success=ok, message=message,
                          reset_id=reset_id if ok else 0)
 
     def close(self) -> None:

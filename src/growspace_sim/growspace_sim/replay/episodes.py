@@ -12,13 +12,14 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, BagMessage
+from growspace_sim.ros.interface import NAMES
 
 # Fields each topic's comparison covers: what the simulation decides, not the ids and stamps.
 COMPARED = {
-    'camera/image_raw': ('height', 'width', 'encoding', 'step', 'data'),
-    'plant/state': ('step', 'node_x', 'node_z', 'parent', 'plant', 'tips', 'branch_count'),
-    'light/state': ('mode', 'x', 'z', 'width', 'radius'),
-    'step_result': ('step', 'reward', 'plant_rewards', 'terminated', 'truncated', 'success'),
+    NAMES['image']: ('height', 'width', 'encoding', 'step', 'data'),
+    NAMES['plant']: ('step', 'node_x', 'node_z', 'parent', 'plant', 'tips', 'branch_count'),
+    NAMES['light']: ('mode', 'x', 'z', 'width', 'radius'),
+    NAMES['result']: ('step', 'reward', 'plant_rewards', 'terminated', 'truncated', 'success'),
 }
 
 
@@ -110,19 +111,19 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
     cfg = base_cfg
     for msg in bag.messages(topics.values()):
         rel = rel_of[msg.topic]
-        if rel == 'reset':
+        if rel == NAMES['reset']:
             request = msg.decode()
             requests[int(request.reset_id)] = request
-        elif rel == 'chamber/config':
+        elif rel == NAMES['config']:
             try:
                 fresh_config = json.loads(msg.decode().data)
             except ValueError:
                 fresh_config = None
-        elif rel == 'light/command':
+        elif rel == NAMES['command']:
             commands.append(msg.decode())
-        elif rel in COMPARED and rel != 'step_result':
+        elif rel in COMPARED and rel != NAMES['result']:
             outputs[rel] = msg
-        elif rel == 'step_result':
+        elif rel == NAMES['result']:
             result = msg.decode()
             if not outputs:
                 # Nothing changed; the commands so far still count (realtime: the latest one

@@ -71,7 +71,7 @@ def export_with_view(path: str | os.PathLike, out: str | os.PathLike, *,
                         for t, i in bag.topics.items()}
             marker_channel = recorder.add_channel(f'{prefix}plant/markers',
                                                   markers.MARKER_ARRAY, OBSERVATION_QOS)
-            image_channel = recorder.add_channel(f'{prefix}camera/image_view', convert.IMAGE,
+            image_channel = recorder.add_channel(f'{prefix}camera/image_view', types.IMAGE,
                                                  OBSERVATION_QOS)
             total = sum(i.count for i in bag.topics.values())
             with tqdm(total=total, desc='export', unit='msg', disable=not progress) as bar:
@@ -97,6 +97,6 @@ def export_with_view(path: str | os.PathLike, out: str | os.PathLike, *,
                                    types.serialize(array, markers.MARKER_ARRAY), *times)
                     image = convert.image_msg(renderer.render(frame), frame.stamp_ns,
                                               scene.image_frame_id)
-                    recorder.write(image_channel, types.serialize(image, convert.IMAGE), *times)
+                    recorder.write(image_channel, types.serialize(image, types.IMAGE), *times)
                     frames += 1
     return frames

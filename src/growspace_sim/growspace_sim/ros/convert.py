@@ -18,8 +18,6 @@ from growspace_sim.core import task as tasks
 from growspace_sim.core.light import Light
 from growspace_sim.ros import types
 
-IMAGE = 'sensor_msgs/msg/Image'
-CLOCK = 'rosgraph_msgs/msg/Clock'
 MODE_BEAM, MODE_SPOT, MODE_DISCRETE, MODE_CONTINUOUS = 0, 1, 2, 3
 MAX_SEED = 2**63 - 1  # seeds travel as uint64; numpy takes any non-negative int
 
@@ -48,7 +46,7 @@ def to_ns(time: Any) -> int:
 def image_msg(image: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
     """``sensor_msgs/Image`` rgb8 of an (H, W, 3) uint8 observation."""
     height, width = image.shape[:2]
-    return _cls(IMAGE)(
+    return _cls(types.IMAGE)(
         header=header(stamp_ns, frame_id), height=height, width=width, encoding='rgb8',
         is_bigendian=0, step=width * 3, data=np.ascontiguousarray(image).reshape(-1))
 
@@ -109,7 +107,7 @@ def _light_command(stamp_ns: int, frame_id: str, step_id: int, mode: int, *, x: 
 
 
 def clock_msg(stamp_ns: int) -> Any:
-    return _cls(CLOCK)(clock=stamp(stamp_ns))
+    return _cls(types.CLOCK)(clock=stamp(stamp_ns))
 
 
 def apply_command(sim: Any, msg: Any) -> None:
@@ -146,14 +144,15 @@ def reset_args(msg: Any) -> tuple[int | None, str | None, str | None]:
     """(seed or None, challenge or None, setting or None) of a ``ResetRequest``.
 
     Raises:
-        CommandError: naming the field for an unknown challenge or setting or a seed too large.
+        CommandError: naming the field for a challenge that is not registered or loaded, or a
+            seed too large (the setting is checked against the challenge by ``SimConfig``).
     """
     challenge = msg.challenge or None
-    setting = msg.setting or None
-    if challenge is not None and challenge not in tasks.names():
+    setting = msg.setting or None  # checked against the challenge's settings by SimConfig
+    if challenge is not None and not tasks.known(challenge):
+        # A message never makes the node import a module: module:attribute challenges are
+        # loaded when the node starts (its challenge parameter), then a reset may name them.
         _reject('challenge', challenge, f'one of {tasks.names()} or empty (keep)')
-    if setting is not None and setting not in tasks.SETTINGS:
-        _reject('setting', setting, f'one of {tasks.SETTINGS} or empty (keep)')
     seed = int(msg.seed) if msg.has_seed else None
     if seed is not None and seed > MAX_SEED:
         _reject('seed', seed, f'an int in [0, {MAX_SEED}]')

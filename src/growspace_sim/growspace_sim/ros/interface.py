@@ -30,11 +30,9 @@ from typing import Any, NamedTuple
 
 from growspace_sim import __version__
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.ros import qos as ros_qos, types
 
-STRING = 'std_msgs/msg/String'
 # keep_all + reliable: a flood makes the sender wait (flow control) instead of losing commands.
 COMMAND_QOS = ros_qos.QosProfile(history='keep_all')
 OBSERVATION_QOS = ros_qos.QosProfile(depth=10)
@@ -60,14 +58,15 @@ INPUTS = (
 # In the order a reset publishes them; a step publishes the same without ``config``, so
 # ``step_result`` always comes last and tells a client that the step is complete.
 OUTPUTS = (
-    Topic('config', 'chamber/config', STRING, ros_qos.LATCHED),
-    Topic('clock', '/clock', convert.CLOCK, ros_qos.CLOCK),
-    Topic('image', 'camera/image_raw', convert.IMAGE, OBSERVATION_QOS),
+    Topic('config', 'chamber/config', types.STRING, ros_qos.LATCHED),
+    Topic('clock', '/clock', types.CLOCK, ros_qos.CLOCK),
+    Topic('image', 'camera/image_raw', types.IMAGE, OBSERVATION_QOS),
     Topic('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
     Topic('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
     Topic('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
 )
 TOPICS = INPUTS + OUTPUTS  # received messages are handled (and recorded) before the outputs
+NAMES = {topic.key: topic.name for topic in TOPICS}  # key ('result') -> name ('step_result')
 
 
 def config_dict(cfg: SimConfig) -> dict[str, Any]:

@@ -21,16 +21,18 @@ PROFILE_NAME = 'fastdds_loopback.xml'
 
 
 def profile_path() -> Path:
-    """The shipped Fast DDS loopback profile (installed share/, else the source tree)."""
+    """The shipped Fast DDS loopback profile (installed share/, else the source tree: also
+    outside a sourced workspace, where ament's index has no ``AMENT_PREFIX_PATH`` to search)."""
     try:
         from ament_index_python.packages import (
             get_package_share_directory, PackageNotFoundError)
-        try:
-            return Path(get_package_share_directory('growspace_sim')) / 'config' / PROFILE_NAME
-        except PackageNotFoundError:
-            pass
     except ImportError:
         pass
+    else:
+        try:
+            return Path(get_package_share_directory('growspace_sim')) / 'config' / PROFILE_NAME
+        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+            pass
     return Path(__file__).resolve().parents[2] / 'config' / PROFILE_NAME
 
 

@@ -32,8 +32,13 @@ LIGHT_COMMAND = 'growspace_msgs/msg/LightCommand'
 PLANT_STATE = 'growspace_msgs/msg/PlantState'
 RESET_REQUEST = 'growspace_msgs/msg/ResetRequest'
 STEP_RESULT = 'growspace_msgs/msg/StepResult'
-RESET_SRV_REQUEST = 'growspace_msgs/srv/Reset_Request'
-RESET_SRV_RESPONSE = 'growspace_msgs/srv/Reset_Response'
+RESET = 'growspace_msgs/srv/Reset'
+RESET_SRV_REQUEST = f'{RESET}_Request'
+RESET_SRV_RESPONSE = f'{RESET}_Response'
+# The standard types a chamber speaks besides its own (every type name is spelled here once).
+IMAGE = 'sensor_msgs/msg/Image'
+CLOCK = 'rosgraph_msgs/msg/Clock'
+STRING = 'std_msgs/msg/String'
 
 # Standard services our nodes offer that rosbags' Jazzy store lacks (std_srvs/srv/Trigger.srv;
 # an empty request is the one-byte placeholder struct rosidl generates).

@@ -1,7 +1,7 @@
 """Experiments as Ray Tune trials: agents x env ids x seeds (``growspace-sweep``).
 
 Every trial is one agent on one env id with one seed, run by the function the single-run
-commands use: ``growspace_sim.agents.evaluate.play_agent`` (``growspace-eval``) for the random
+commands use: ``growspace_sim.agents.evaluation.play_agent`` (``growspace-eval``) for the random
 agent and the oracle, ``growspace_sim.learn.train.train`` (``growspace-train``) then
 ``growspace_sim.learn.evaluate_policies.evaluate_env`` (``growspace-compare``) for PPO, A2C, DQN
 and Rainbow. All trials are evaluated on the same episode seeds, so the experiment's table and

@@ -14,11 +14,11 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
-from growspace_sim.agents import evaluate
+from growspace_sim.agents import evaluation
 from growspace_sim.core.schema import Bounds
 
 
-BASELINES = evaluate.AGENTS
+BASELINES = evaluation.AGENTS
 LEARNERS = ('ppo', 'a2c', 'dqn', 'rainbow')  # growspace_sim.learn.train.ALGOS, without torch
 SPEC_KEYS = ('name', 'episodes', 'eval_seed', 'runs')
 GROUP_KEYS = ('agents', 'envs', 'seeds', 'steps', 'hp', 'n_envs', 'max_minutes', 'device',

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from growspace_sim.agents import evaluate
+from growspace_sim.agents import evaluation
 from growspace_sim.learn import evaluate_policies
 from growspace_sim.sweep.spec import BASELINES, Spec, SpecError, Trial
 
@@ -61,13 +61,14 @@ def run_trial(trial: Trial, out: Path) -> dict[str, float]:
     eval_env = evaluate_policies.EVAL_ENV.get(trial.env, trial.env)
     success = None
     if trial.agent in BASELINES:
-        played = evaluate.play_agent(eval_env, trial.agent, trial.episodes, trial.eval_seed,
-                                     trial.eval_seed + trial.seed, trial.env_kwargs)
+        played = evaluation.play_agent(eval_env, trial.agent, trial.episodes,
+                                       trial.eval_seed, trial.eval_seed + trial.seed,
+                                       trial.env_kwargs)
         rewards, success, label, steps = played.rewards, played.success, trial.agent, 0
     else:
         rewards, eval_env, label, steps = _train_and_evaluate(trial, out / 'run')
-    returns = rewards.sum(axis=1)
-    mean, se = evaluate.mean_se(returns)
+    returns = evaluation.episode_returns(rewards)
+    mean, se = evaluation.mean_se(returns)
     wall = time.perf_counter() - start
     np.save(out / 'rewards.npy', rewards)
     with open(out / 'evaluation.csv', 'w', newline='') as f:

@@ -1,16 +1,17 @@
 """Environment speed benchmark (``growspace-bench``), with a fixed method.
 
 Per challenge (easy setting, discrete actions): uniform random actions from a seeded action
-space, 50-step episodes, observations rendered every step, through ``gymnasium.make`` (so the
-default wrappers are included), and through ``gymnasium.make_vec(...,
+space (drawn before the clock starts), 50-step episodes, observations rendered every step,
+through ``gymnasium.make`` (so the default wrappers are included) and the one episode loop
+(``agents.evaluation.play_episodes``), and through ``gymnasium.make_vec(...,
 vectorization_mode='vector_entry_point')`` with N = 1, 16, 64, 256 chambers (whole episodes:
 ``ceil(episodes / N)`` rounds of 51 vector steps, the 51st being the autoreset; each counts N
-env steps). After one warm-up episode, it times ``--episodes`` episodes
-``--repeats`` times and reports the best repeat (the least disturbed by other processes), plus
-the core alone (no rendering, no Gymnasium) on the same seeds so the ratio shows the overhead.
-The process is pinned to one CPU. Rates are per second of the process's CPU time, which a
-shared virtual machine's stolen time does not inflate; the wall-clock rate of the same repeat
-is shown beside it. Also reported: mean reset time, mean segments per plant at
+env steps). After one warm-up episode, it times ``--episodes`` episodes ``--repeats`` times and
+reports the best repeat (the least disturbed by other processes), plus the core alone (no
+rendering, no Gymnasium) on the same seeds so the ratio shows the overhead. The process is
+pinned to one CPU. Rates are per second of the process's CPU time, which a shared virtual
+machine's stolen time does not inflate; the wall-clock rate of the same repeat is shown beside
+it. Also reported: mean reset time (resets alone, on the same seeds), mean segments per plant at
 step 50 and the peak resident memory. A second table shows how resources grow with the episode
 length and the light density: each row runs in a fresh process (its own peak memory), resets the
 control env three times (best reset time) and plays one random episode.
@@ -37,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
+from growspace_sim.agents.evaluation import play_episodes
 from growspace_sim.core import light as lights
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core import task as tasks
@@ -49,25 +51,32 @@ RESOURCE_ROWS = ({}, {'episode_length': 20_000}, {'light_density': 12_800})
 RESOURCE_TARGETS = {'episode_length': (50.0, 200.0)}  # reset ms, peak MiB; from issue 10
 
 
+class ScriptedAgent:
+    """Actions drawn before the clock starts, so the timing holds no sampling."""
+
+    def __init__(self, actions: list) -> None:
+        self._actions = iter(actions)
+
+    def act(self, observation: np.ndarray, env: gym.Env) -> int:
+        return next(self._actions)
+
+
 def run_env(name: str, episodes: int, seed: int) -> tuple[float, float, float, float]:
     """(CPU steps/s, wall steps/s, mean reset seconds, mean segments per plant at step 50)."""
     env = gym.make(name)
     env.action_space.seed(seed)
-    actions = [env.action_space.sample() for _ in range(50 * episodes)]
-    reset_time, segments, steps = 0.0, [], 0
+    agent = ScriptedAgent([env.action_space.sample() for _ in range(50 * episodes)])
+    seeds = range(seed, seed + episodes)
     start, cpu_start = time.perf_counter(), time.process_time()
-    for episode in range(episodes):
-        t = time.process_time()
-        env.reset(seed=seed + episode)
-        reset_time += time.process_time() - t
-        truncated = False
-        while not truncated:
-            _, _, _, truncated, info = env.step(actions[steps])
-            steps += 1
-        segments.append(np.mean(info['branch_counts']))
+    played = play_episodes(env, agent, seeds)
     cpu, wall = time.process_time() - cpu_start, time.perf_counter() - start
+    cpu_start = time.process_time()
+    for episode_seed in seeds:  # resets alone, on the same seeds
+        env.reset(seed=episode_seed)
+    reset_time = (time.process_time() - cpu_start) / episodes
     env.close()
-    return steps / cpu, steps / wall, reset_time / episodes, float(np.mean(segments))
+    segments = np.mean([np.mean(info['branch_counts']) for info in played.infos])
+    return played.steps / cpu, played.steps / wall, reset_time, float(segments)
 
 
 def run_vector(name: str, num_envs: int, episodes: int, seed: int) -> tuple[float, float]:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from growspace_sim import replay
-from growspace_sim.agents.reference import OracleAgent, RandomAgent
+from growspace_sim.agents import OracleAgent, play_episodes, RandomAgent
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
@@ -28,13 +28,16 @@ from growspace_sim.ros import loopback
 
 
 def record_oracle(path: Path, setting: str, seed: int) -> None:
-    """One oracle episode per challenge on an in-process chamber node, recorded to ``path``."""
+    """One oracle episode per challenge (with an oracle and this setting) on an in-process
+    chamber node, recorded to ``path``."""
     with McapRecorder(path) as recorder:
-        runner = EpisodeRunner(SimConfig(challenge=tasks.names()[0], setting=setting), recorder)
+        challenges = [t.name for t in tasks.all_tasks() if setting in t.settings and t.oracle]
+        runner = EpisodeRunner(SimConfig(challenge=challenges[0], setting=setting), recorder)
         oracle = OracleAgent()
-        for challenge in tasks.names():
-            total, steps = runner.run_episode(oracle.act, seed, challenge=challenge)
-            print(f'  oracle  {challenge:10s} {setting}: return {total:6.2f} over {steps} steps')
+        for challenge in challenges:
+            played = play_episodes(runner, oracle, [seed], options={'challenge': challenge})
+            print(f'  oracle  {challenge:10s} {setting}: return {played.returns[0]:6.2f} over '
+                  f'{played.steps} steps')
         runner.close()
 
 
@@ -44,15 +47,8 @@ def record_bridged(path: Path, setting: str, seed: int) -> None:
 
     env = GrowSpaceBridgeEnv('control', setting, node_params={'record_path': str(path)})
     try:
-        agent = RandomAgent(env.action_space, seed)
-        observation, _ = env.reset(seed=seed)
-        total, done = 0.0, False
-        while not done:
-            observation, reward, terminated, truncated, _ = env.step(
-                agent.act(observation, env))
-            total += reward
-            done = terminated or truncated
-        print(f'  random  control    {setting}: return {total:6.2f} through sim_node '
+        played = play_episodes(env, RandomAgent(env.action_space, seed), [seed])
+        print(f'  random  control    {setting}: return {played.returns[0]:6.2f} through sim_node '
               f'({env.namespace})')
     finally:
         env.close()  # stops the node, which finishes its recording
@@ -76,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--out', default='bags', help='parent directory (default: bags/)')
     parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--setting', default='hard', choices=tasks.SETTINGS)
+    parser.add_argument('--setting', default='hard',
+                        choices=sorted({s for task in tasks.all_tasks() for s in task.settings}))
     parser.add_argument('--no-ros', action='store_true',
                         help='skip the sim_node + bridge part (no ROS 2)')
     args = parser.parse_args(argv)

@@ -23,45 +23,32 @@ import time
 from typing import Any
 
 from growspace_sim import recording
-
-from growspace_sim.ros import convert
+from growspace_sim.agents.evaluation import AGENTS, make_agent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
+from growspace_sim.ros import convert, names, qos as ros_qos
 from growspace_sim.ros.interface import TOPICS
-from growspace_sim.ros import names, qos as ros_qos
 
 
 def run(args: argparse.Namespace) -> int:
     """Record ``args.episodes`` episodes of an agent; returns the exit status."""
-    from growspace_sim.agents.reference import OracleAgent, RandomAgent
-
     cfg = SimConfig(challenge=args.challenge, setting=args.setting)
     with recording.stop_on_signals(), \
             recording.McapRecorder(args.out, overwrite=args.overwrite) as recorder:
         runner = EpisodeRunner(cfg, recorder, namespace=args.namespace, rate_hz=args.rate_hz)
-        if args.agent == 'oracle':
-            policy = OracleAgent().act
-        else:
-            import gymnasium as gym
+        # The first reset starts the node (its first episode); later ones are ResetRequests.
+        agent = make_agent(args.agent, runner, args.seed)
+        period, next_tick = 1.0 / args.rate_hz, time.monotonic()
 
-            policy = RandomAgent(gym.spaces.Discrete(runner.n_actions), args.seed).act
-        period = 1.0 / args.rate_hz
-        next_tick = time.monotonic()
+        def pace() -> None:
+            nonlocal next_tick
+            next_tick += period
+            time.sleep(max(0.0, next_tick - time.monotonic()))
         for episode in range(args.episodes):
-            # The first episode is the node's start; later ones begin with a ResetRequest.
-            runner.reset(args.seed + episode)
-            ret = 0.0
-            while True:
-                if args.realtime:
-                    next_tick += period
-                    time.sleep(max(0.0, next_tick - time.monotonic()))
-                outcome = runner.step(policy(runner.observation, runner))
-                ret += outcome.reward
-                if outcome.truncated:
-                    break
-            print(f'episode {episode}: seed {args.seed + episode}, return {ret:.4f}',
-                  flush=True)
+            seed = args.seed + episode
+            played = play_episodes(runner, agent, [seed], on_step=pace if args.realtime else None)
+            print(f'episode {episode}: seed {seed}, return {played.returns[0]:.4f}', flush=True)
         if runner.recording_error:
             print(f'growspace-record: error: {runner.recording_error}', file=sys.stderr)
             return 1
@@ -128,10 +115,12 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest='command', required=True)
     p_run = sub.add_parser('run', help='run episodes in-process and record them')
     p_run.add_argument('out')
-    p_run.add_argument('--challenge', choices=tasks.names(), default='control')
-    p_run.add_argument('--setting', choices=tasks.SETTINGS, default='easy')
+    p_run.add_argument('--challenge', default='control',
+                       help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
+                       'of your own')
+    p_run.add_argument('--setting', default='easy', help='a setting of the challenge')
     p_run.add_argument('--episodes', type=int, default=1)
-    p_run.add_argument('--agent', choices=('oracle', 'random'), default='oracle')
+    p_run.add_argument('--agent', choices=AGENTS, default='oracle')
     p_run.add_argument('--seed', type=int, default=0, help='episode i uses seed + i')
     p_run.add_argument('--rate-hz', type=float, default=10.0)
     p_run.add_argument('--realtime', action='store_true', help='pace steps at rate-hz')
@@ -146,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return run(args) if args.command == 'run' else subscribe(args)
-    except recording.RecordingError as e:
+    except (recording.RecordingError, ValueError) as e:  # a bad challenge, setting, file
         print(f'growspace-record: error: {e}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

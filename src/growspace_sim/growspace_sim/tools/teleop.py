@@ -61,7 +61,7 @@ class Teleop:
         self.send_reset = transport.publisher(types.RESET_REQUEST, 'reset', COMMAND_QOS)
         transport.subscribe(types.STEP_RESULT, 'step_result', OBSERVATION_QOS, self._on_result)
         transport.subscribe(types.LIGHT_COMMAND, 'light/state', OBSERVATION_QOS, self._on_light)
-        transport.subscribe('std_msgs/msg/String', 'chamber/config', ros_qos.LATCHED,
+        transport.subscribe(types.STRING, 'chamber/config', ros_qos.LATCHED,
                             self._on_config)
         self.last_step_id = 0
         self.last_result: Any = None

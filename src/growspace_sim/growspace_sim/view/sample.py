@@ -12,7 +12,7 @@ from typing import Any
 
 from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.ros.interface import STRING, config_json
+from growspace_sim.ros.interface import config_json
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 
@@ -40,7 +40,7 @@ def episode_messages(cfg: SimConfig, seed: int, steps: int | None = None, *,
     agent = cfg.task.oracle() if oracle and cfg.task.oracle is not None else None
     stamp = PERIOD_NS
     payload = config_json(cfg, seed, frame_id=frame_id, digit=sim.digit, reset_id=0)
-    yield 'chamber/config', types.new(STRING, data=payload)
+    yield 'chamber/config', types.new(types.STRING, data=payload)
     total = cfg.episode_length if steps is None else min(steps, cfg.episode_length)
     for step in range(total + 1):
         if step:

@@ -67,5 +67,6 @@ TASK = register(Task(
     extra_envs={
         'GrowSpace/Shape-AllDigits-v0': ('growspace_sim.envs.env:GrowSpaceEnv',
                                          {'challenge': 'shape', 'digits': tuple(range(10))}),
-        'GrowSpace/Shape-Curriculum-v0': ('growspace_sim.envs.env:make_curriculum', {}),
+        'GrowSpace/Shape-Curriculum-v0': ('growspace_sim.envs.env:make_curriculum',
+                                          {'challenge': 'shape'}),
     }))
