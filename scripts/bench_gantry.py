@@ -30,9 +30,9 @@ from growspace_gantry.link import SerialLink  # noqa: E402
 from growspace_gantry.main import default_calibration  # noqa: E402
 from growspace_gantry.node import GantryNode  # noqa: E402
 from growspace_gantry.settings import GantryParams  # noqa: E402
-from growspace_sim.ros import convert  # noqa: E402
 from growspace_sim.core.config import SimConfig  # noqa: E402
 from growspace_sim.node.fake import FakeTransport  # noqa: E402
+from growspace_sim.ros import convert  # noqa: E402
 from growspace_sim.ros import types  # noqa: E402
 
 RIG = {10: 1, 20: 1, 22: 0, 30: 1000, 32: 1, 110: 6000, 111: 6000, 112: 6000, 130: 900,

@@ -32,8 +32,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'src', 'growspace_sim'))
 
-from growspace_sim.ros import convert  # noqa: E402
 from growspace_sim.core.config import SimConfig  # noqa: E402
+from growspace_sim.ros import convert  # noqa: E402
 from growspace_sim.ros import types  # noqa: E402
 from growspace_sim.view import markers, Scene  # noqa: E402
 from growspace_sim.view.image import ViewRenderer  # noqa: E402

@@ -12,9 +12,9 @@ import pytest
 
 from growspace_sim.tools import bench
 
-from growspace_sim.tools import evaluate
 from growspace_sim.agents import OracleAgent, play_episodes, RandomAgent
 from growspace_sim.envs.registration import env_id
+from growspace_sim.tools import evaluate
 
 
 def test_random_agent_is_seeded():

@@ -9,8 +9,8 @@ import pytest
 
 from growspace_gym_bridge import BridgeTimeout
 from growspace_gym_bridge.link import ChamberLink
-from growspace_sim.ros import convert
 from growspace_sim.node.fake import FakeTransport
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 
 NS = '/chamber'

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from growspace_sim.core import chamber as chamber_module, light as lights
-from growspace_sim.core.chamber import Chamber
 from growspace_sim.core import task as tasks
+from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
 from growspace_sim.core.tasks import distance_reward, jaccard

@@ -22,9 +22,9 @@ from growspace_gantry.link import SerialLink
 from growspace_gantry.main import default_calibration
 from growspace_gantry.node import GantryNode
 from growspace_gantry.settings import GantryParams
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.fake import FakeTransport
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 

@@ -17,11 +17,11 @@ import pytest
 
 from grbl_emulator import GrblEmulator
 from growspace_gym_bridge.link import ChamberLink
-from growspace_sim.ros import convert
-from growspace_sim.ros.interface import COMMAND_QOS
 from growspace_sim.node.rclpy_transport import RclpyTransport
 from growspace_sim.replay import compare, format_comparison
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import COMMAND_QOS
 from ros_helpers import NodeProcess
 from test_gantry_node import RIG
 

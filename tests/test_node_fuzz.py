@@ -7,15 +7,15 @@ import random
 
 import numpy as np
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.node.chamber_node import ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
-from growspace_sim.ros.interface import COMMAND_QOS
 from growspace_sim.node.rclpy_transport import RclpyTransport
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import COMMAND_QOS
 from ros_helpers import Client, NodeProcess
 
 NAMESPACE = '/gs_fuzz'

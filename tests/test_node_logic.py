@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import growspace_sim
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.node.chamber_node import EPISODE_OVER, INPUTS, OUTPUTS, ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 
 SEED = 1234

@@ -31,11 +31,11 @@ from growspace_sim import recording
 from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
-from growspace_sim.ros.interface import TOPICS
 from growspace_sim.recording import McapRecorder, RecordingError
 from growspace_sim.recording.chunk_writer import record_bytes
 from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros.interface import TOPICS
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHONPATH = str(ROOT / 'src' / 'growspace_sim')

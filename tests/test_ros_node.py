@@ -27,8 +27,8 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
                                 SetParameters)
 from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
-import growspace_sim.envs.registration  # noqa: F401 - registers the GrowSpace ids
 from growspace_sim.core import task as tasks
+import growspace_sim.envs.registration  # noqa: F401 - registers the GrowSpace ids
 
 from growspace_sim.node import params
 from growspace_sim.ros import interface

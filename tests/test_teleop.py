@@ -13,12 +13,12 @@ import time
 
 import pytest
 
-from growspace_sim.ros import convert
-from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.node.params import NodeParams
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.tools.teleop import QUIT, RESET, Teleop, key_to_command
 from ros_helpers import Client, NodeProcess

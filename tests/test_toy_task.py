@@ -18,8 +18,8 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS
 from growspace_sim.core.state import ChamberState
 from growspace_sim.core.task import Layout, Score, Task
-from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.envs.registration import env_id, register_envs
+from growspace_sim.node.episode_runner import EpisodeRunner
 
 
 def tall_layout(cfg: SimConfig, rng: np.random.Generator) -> Layout:

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 from growspace_sim.view import markers, Scene, ViewInputError

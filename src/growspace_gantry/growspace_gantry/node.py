@@ -40,15 +40,15 @@ from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController
 from growspace_gantry.settings import GantryParams
 from growspace_sim import __version__
-from growspace_sim.ros import convert
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
 from growspace_sim.node.chamber_node import EPISODE_OVER, Recorder, step_id_error
+from growspace_sim.node.transport import Transport
+from growspace_sim.ros import convert
+from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import (
     COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, Topic)
-from growspace_sim.node.transport import Transport
-from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation
 
 DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'

@@ -13,11 +13,11 @@ import gymnasium as gym
 from gymnasium.utils import EzPickle
 import numpy as np
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs.env import as_action_index, check_env_args, spaces_for
 from growspace_sim.node import params as node_params_mod
 from growspace_sim.node.chamber_node import EPISODE_OVER
+from growspace_sim.ros import convert
 from growspace_sim.ros import loopback
 
 from growspace_gym_bridge.errors import BridgeError, CommandRejected, NodeDied

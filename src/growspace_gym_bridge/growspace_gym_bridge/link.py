@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 from growspace_sim.ros import convert
-from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 
 RESULT, IMAGE, PLANT, LIGHT, CONFIG = 'step_result', 'camera/image_raw', 'plant/state', \
     'light/state', 'chamber/config'

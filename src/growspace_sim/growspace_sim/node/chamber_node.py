@@ -23,17 +23,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from growspace_sim.ros import convert
 from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
+from growspace_sim.node.params import NodeParams, ParamError, as_values, build
+from growspace_sim.node.transport import Transport
+from growspace_sim.ros import convert
+from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import (
     COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, config_json,
     digit_fingerprint, growspace_metadata)
-from growspace_sim.node.params import NodeParams, ParamError, as_values, build
-from growspace_sim.node.transport import Transport
-from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.simulation import Simulation
 
 __all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'OBSERVATION_QOS', 'OUTPUTS',

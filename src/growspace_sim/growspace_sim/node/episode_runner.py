@@ -17,13 +17,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from growspace_sim.ros import convert
 from growspace_sim.core.chamber import Chamber
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.local import LocalTransport
 from growspace_sim.node.params import DEFAULT_NODE_NAME, NodeParams
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
 
 DEFAULT_NAMESPACE = '/growspace'

@@ -26,11 +26,11 @@ Modules: ``recorder`` (``McapRecorder``, signals, exit), ``chunk_writer`` (the b
 writer) and ``recovery`` (``recover``).
 """
 
-from growspace_sim.ros.interface import (  # noqa: F401 - re-exported: part of the file format
-    FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 from growspace_sim.recording.recorder import (
     CHUNK_SIZE, FLUSH_PERIOD_S, LIBRARY, McapRecorder, PROFILE, RecordingError, stop_on_signals)
 from growspace_sim.recording.recovery import recover, RecoveryReport
+from growspace_sim.ros.interface import (  # noqa: F401 - re-exported: part of the file format
+    FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 
 __all__ = ['CHUNK_SIZE', 'FLUSH_PERIOD_S', 'FORMAT', 'LIBRARY', 'McapRecorder', 'METADATA_NAME',
            'PROFILE', 'RecordingError', 'RecoveryReport', 'config_dict', 'config_json',

@@ -10,11 +10,11 @@ from typing import Any
 
 from mcap.records import Message
 
-from growspace_sim.ros.interface import TOPICS
 from growspace_sim.recording import PROFILE
 from growspace_sim.recording.scan import (
     Damage, damage_from_metadata, McapScan, RECOVERY_METADATA)
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros.interface import TOPICS
 
 
 class ReplayError(Exception):

@@ -7,9 +7,9 @@ import dataclasses
 import math
 import os
 
-from growspace_sim.ros import convert
 from growspace_sim.replay.bag import Bag
 from growspace_sim.replay.episodes import Episode, read_episodes
+from growspace_sim.ros import convert
 
 BEAM_FIELDS = ('x', 'width')  # what a beam's light/state means (z and radius are unused)
 SPOT_FIELDS = ('x', 'z', 'radius')

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from growspace_sim.ros import convert
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import read_episodes
+from growspace_sim.ros import convert
 
 
 def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: int = 0,

@@ -16,11 +16,11 @@ from typing import Any
 
 from tqdm import tqdm
 
-from growspace_sim.ros import convert
-from growspace_sim.ros.interface import OBSERVATION_QOS
 from growspace_sim.recording import McapRecorder
 from growspace_sim.replay.bag import Bag, ReplayError
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import OBSERVATION_QOS
 from growspace_sim.view import markers, Scene, ViewInputError
 from growspace_sim.view.image import DEFAULT_SIZE, ViewRenderer
 

@@ -9,13 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from growspace_sim.ros import convert
-from growspace_sim.ros.interface import digit_fingerprint
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import COMPARED, Episode, StepRecord, read_episodes
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import digit_fingerprint
 from growspace_sim.simulation import Simulation
 
 

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.errors import CommandError
-from growspace_sim.core import task as tasks
 from growspace_sim.core.light import Light
 from growspace_sim.ros import types
 

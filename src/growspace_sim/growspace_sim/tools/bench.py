@@ -40,8 +40,8 @@ import numpy as np
 import growspace_sim  # noqa: F401  (registers the ids)
 from growspace_sim.agents.evaluation import play_episodes
 from growspace_sim.core import light as lights
-from growspace_sim.core.chamber import Chamber
 from growspace_sim.core import task as tasks
+from growspace_sim.core.chamber import Chamber
 from growspace_sim.envs.registration import env_id
 from growspace_sim.simulation import Simulation
 

@@ -21,8 +21,8 @@ import time
 
 import yaml
 
-from growspace_sim.ros.interface import COMMAND_QOS
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import COMMAND_QOS
 
 
 def main(argv: Sequence[str] | None = None) -> int:

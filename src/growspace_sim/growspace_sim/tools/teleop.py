@@ -17,10 +17,10 @@ import secrets
 import sys
 from typing import Any
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
+from growspace_sim.ros import convert
 from growspace_sim.ros import qos as ros_qos, types
 
 QUIT, RESET = 'quit', 'reset'

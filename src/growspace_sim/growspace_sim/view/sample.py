@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
-from growspace_sim.ros.interface import config_json
+from growspace_sim.ros import convert
 from growspace_sim.ros import types
+from growspace_sim.ros.interface import config_json
 from growspace_sim.simulation import Simulation
 
 PERIOD_NS = 20_000_000  # 50 Hz

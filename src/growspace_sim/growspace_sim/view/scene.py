@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from growspace_sim.ros import convert
 from growspace_sim.core.config import SimConfig
+from growspace_sim.ros import convert
 from growspace_sim.simulation import Simulation
 
 _KEEP = 16  # plant and light states kept while waiting for their step_result
