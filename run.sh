@@ -29,16 +29,32 @@ setup() {
       exit 2; }
     echo "Setting up $venv with $python (first run only) ..." >&2
     rm -rf "$venv"
-    "$python" -m venv "$venv"
-    local pip=("$venv/bin/python" -m pip install -q --disable-pip-version-check)
+    "$python" -m venv "$venv" || { rm -rf "$venv"; echo "run.sh: $python could not create" \
+      "a virtual environment (on Debian/Ubuntu: apt install python3-venv)." >&2; exit 1; }
     local req
-    for req in "$@"; do "${pip[@]}" -r "$req"; done
-    "${pip[@]}" --no-deps -r requirements-nodeps.txt
+    for req in "$@"; do pip_install "$venv" -r "$req"; done
+    pip_install "$venv" --no-deps -r requirements-nodeps.txt
     # The ROS wheels' CMake exports name their build image's Python paths (ros2-pypi.md).
     "$venv/bin/python" scripts/fix_ros_wheel_cmake.py "$venv"
     touch "$stamp"
   fi
   build "$venv" "$ws"
+}
+
+# pip_install VENV ARGS...: pip install into VENV. pip's output goes to a log; on failure the
+# user gets its tail and one line, and the half-built VENV is removed, so that it is never
+# mistaken for a working one.
+pip_install() {
+  local venv=$1
+  shift
+  local log="$venv.pip.log"
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check "$@" > "$log" 2>&1 || {
+    tail -n 5 "$log" >&2
+    rm -rf "$venv"
+    echo "run.sh: pip could not install $* into $venv (is a package index reachable?);" \
+         "its output is in $log." >&2
+    exit 1; }
+  rm -f "$log"
 }
 
 # build VENV WORKSPACE: colcon build of src/ against VENV, when a package or the venv changed.
@@ -127,5 +143,6 @@ case "$cmd" in
       tests/test_digits.py tests/test_agents.py \
       tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
       tests/test_bridge.py tests/test_view.py tests/test_view_ros.py tests/test_bag_damage.py ;;
-  *) sed -n '2,9p' "$0"; exit 2 ;;
+  help|-h|--help) sed -n '2,9p' "$0" ;;
+  *) sed -n '2,9p' "$0" >&2; echo "run.sh: unknown subcommand '$cmd'" >&2; exit 2 ;;
 esac

@@ -146,3 +146,17 @@ def test_teleop_in_a_terminal_drives_the_node() -> None:
         os.close(fd)
         code, err = node.stop()
     assert code == 0, err
+
+
+@pytest.mark.parametrize(('args', 'code', 'words'), [
+    (['--help'], 0, 'usage: teleop'),
+    ([], 2, 'teleop: needs an interactive terminal'),
+    (['-p', 'x:=1'], 2, 'unrecognized arguments: -p x:=1'),
+])
+def test_teleop_without_a_terminal_says_so_in_one_line(args, code, words) -> None:
+    import subprocess
+
+    out = subprocess.run([sys.executable, '-m', 'growspace_sim.tools.teleop', *args],
+                         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert out.returncode == code, out.stderr
+    assert words in out.stdout + out.stderr and 'Traceback' not in out.stderr

@@ -29,7 +29,7 @@ setup(
     entry_points={
         'console_scripts': [
             'growspace-eval = growspace_sim.tools.evaluate:main',
-            'growspace-train = growspace_sim.learn.train:main',
+            'growspace-train = growspace_sim.learn:train_main',
             'growspace-compare = growspace_sim.learn.evaluate_policies:main',
             'growspace-sweep = growspace_sim.sweep:main',
             'growspace-bench = growspace_sim.tools.bench:main',

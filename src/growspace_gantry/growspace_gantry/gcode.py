@@ -10,6 +10,7 @@ refuse it too.
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Iterator
 import sys
 
@@ -76,6 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ReplayError, calibration.CalibrationError, ValueError) as e:
         print(f'growspace-gantry-gcode: error: {e}', file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader stopped early (`| head`): not an error of ours
+        # Python would complain again flushing stdout at exit; hand it a sink instead.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 

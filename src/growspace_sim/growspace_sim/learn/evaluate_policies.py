@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
+from growspace_sim import learn
 from growspace_sim.agents import evaluation
 
 EVAL_ENV = {'GrowSpace/Shape-Curriculum-v0': 'GrowSpace/Shape-AllDigits-v0'}
@@ -298,6 +299,11 @@ def main(argv: list[str] | None = None) -> int:
     for run in args.run:
         if not (Path(run) / 'run.json').exists():
             parser.error(f'{run} is not a run directory (no run.json)')
+    absent = learn.missing()
+    if absent:
+        print(f'growspace-compare: loading a policy needs the learn extra ({", ".join(absent)} '
+              'not installed): pip install -r requirements-learn.txt', file=sys.stderr)
+        return 2
     rows = compare(args.run, args.episodes, args.out, args.seed, args.workers,
                    not args.stochastic, not args.no_plots)
     print(markdown(rows))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Mapping
-import importlib.util
 import os
 import re
 from dataclasses import dataclass, field
@@ -14,6 +13,7 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
+from growspace_sim import learn
 from growspace_sim.agents import evaluation
 from growspace_sim.core.schema import Bounds
 
@@ -153,7 +153,7 @@ def _expand(group: Any, where: str, episodes: int, eval_seed: int) -> list[Trial
     if learners:
         if 'steps' not in group:
             raise SpecError(f'{where}: steps is required for {", ".join(learners)}.')
-        if not importlib.util.find_spec('stable_baselines3'):
+        if learn.missing():
             raise SpecError(f'{where}: agents {learners} need the learn extra '
                             '(pip install -r requirements-learn.txt).')
         options.update(steps=_integer(group['steps'], f'{where}.steps', minimum=1),

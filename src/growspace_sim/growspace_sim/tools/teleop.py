@@ -10,6 +10,7 @@ Usage: ``ros2 run growspace_sim teleop --ros-args -r __ns:=/chamber1`` or
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 import curses
 import json
@@ -131,10 +132,20 @@ def _loop(screen: Any, teleop: Teleop) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script ``teleop`` (``--ros-args -r __ns:=/chamber1`` picks the chamber)."""
     from rclpy.executors import ExternalShutdownException
+    from rclpy.utilities import remove_ros_args
 
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     argv = sys.argv[1:] if argv is None else list(argv)
+    parser = argparse.ArgumentParser(
+        prog='teleop', description=__doc__.split('\n')[0],
+        epilog=f'Keys: {HELP}. ROS arguments come after --ros-args, e.g. '
+               '--ros-args -r __ns:=/chamber1.')
+    parser.parse_args(remove_ros_args(['teleop', *argv])[1:])  # --help; unknown flags: exit 2
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):
+        print('teleop: needs an interactive terminal (it reads keys with curses); without one, '
+              'publish commands with python -m growspace_sim.tools.pub', file=sys.stderr)
+        return 2
     try:
         transport = RclpyTransport('growspace_teleop', args=['teleop', *argv])
     except Exception as e:  # noqa: BLE001 - rcl's own message names the bad argument
@@ -142,6 +153,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         curses.wrapper(_loop, Teleop(transport))
+    except curses.error as e:  # a terminal too small or without the capabilities curses needs
+        print(f'teleop: the terminal cannot be used ({e})', file=sys.stderr)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
