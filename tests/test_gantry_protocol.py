@@ -45,7 +45,7 @@ def test_status_fields_by_name_in_any_order() -> None:
     assert w.machine_position(None) is None
     assert w.machine_position((10.0, 0.0, -1.0)) == (11.0, 1.0, 0.0)
     for state in grbl.STATES:
-        assert grbl.parse_line(f'<{state}|MPos:0,0,0>').state == state
+        assert grbl.parse_line(f'<{state}|MPos:0.000,0.000,0.000>').state == state
 
 
 def test_lines_we_build() -> None:

@@ -137,7 +137,7 @@ def test_unlock_never_starts_a_move(realtime) -> None:
     assert call(rig, 'gantry/unlock').success
     assert rig.run_until(lambda: rig.grbl.state == 'Idle')
     settle(rig, 0.5)
-    assert rig.grbl.lines[mark:] == ['$X']
+    assert rig.grbl.lines[mark:].count('$X') == 1 and moves_after(rig, mark) == []
     assert rig.grbl.mpos == stopped_at and rig.grbl.spindle[0] == 'M5'
 
 
