@@ -7,13 +7,7 @@ safety rules to those (``safety.py``). What this layer guarantees:
 - Nothing is sent before the start-up banner; the ``$$`` settings are read at every connection
   and checked against the calibration (a contradiction is a fault: nothing moves).
 - Character counting against the 128-byte receive buffer, one line in flight at a time.
-- A move is one jog (``$J=``) to machine coordinates, sent only from Idle. A newer target
-  cancels it the way GRBL allows: ``0x85`` only once GRBL has accepted the jog (its ``ok``) and
-  reports Jog (GRBL ignores a cancel in any other state), then the newest target goes once the
-  machine reports Idle. A target gets one jog: a jog that ends short of it without our cancel
-  (a hold, a door on the machine) is a fault, never retried.
-- G-code (the lamp's ``M3``/``M5``) is only sent while Idle with no jog: GRBL refuses it while
-  jogging (error:9).
+- A move is one jog to machine coordinates, cancelled the way GRBL allows (``motion.py``).
 - Every fault clears the target and the lamp power asked for: nothing moves or lights up again
   until the node asks anew.
 - A position is believed only from a well-formed report (``grbl.parse_line``) that is
@@ -30,16 +24,15 @@ from dataclasses import dataclass
 from growspace_gantry import grbl, position as positions
 from growspace_gantry.calibration import Calibration
 from growspace_gantry.link import Link, LinkLost
+from growspace_gantry.motion import Motion, SETTLED_REPORTS
 
 BANNER_TIMEOUT_S = 3.0  # after a soft reset GRBL prints its banner within ~1 s
 SETTINGS_TIMEOUT_S = 3.0
 SILENCE_S = 3.0  # connected, and nothing heard for this long (status asked at >= 0.5 Hz): lost
 BACKOFF_S = (0.5, 1.0, 2.0, 5.0, 10.0)  # reconnection delays, the last one repeats
-SETTLED_REPORTS = 2  # Idle reports in a row at one position: the machine stands there
 
 OFFLINE, BOOTING, CONFIGURING, READY, FAULT = 'offline', 'booting', 'configuring', 'ready', \
     'fault'
-SENT, ACCEPTED, RUNNING, CANCELLING = 'sent', 'accepted', 'running', 'cancelling'  # a jog's life
 
 
 @dataclass
@@ -61,14 +54,6 @@ class Fault:
 @dataclass(frozen=True)
 class Homed:
     """A person's homing cycle ($H) finished: the machine position is known again."""
-
-
-@dataclass
-class Jog:
-    """The one jog on the machine."""
-
-    target: dict[str, float]
-    phase: str = SENT
 
 
 class GrblController:
@@ -97,17 +82,11 @@ class GrblController:
         self.fault: str | None = None  # why nothing moves (settings mismatch), until restart
         self.failure: str | None = None  # the last failure, until the next recovery
         self.version = ''
-        self.target: dict[str, float] | None = None  # where the machine should go
-        self.lamp_s = 0.0  # lamp power asked for [S]
-        self._lamp_accepted: float | None = None  # lamp power of the last line GRBL accepted
-        self._jog: Jog | None = None
-        self._jogged = False  # the target's one jog was sent (or not needed)
-        self._queue: list[str] = []  # G-code waiting for Idle
+        self.motion = Motion(calibration)  # the target, the lamp, the jog on the machine
         self._events: list[Fault | Homed] = []
         self._own_reset = False  # the next banner answers our own soft reset
         self._filter = positions.PositionFilter()
         self._settled = 0  # Idle reports in a row at the believed position
-        self._ask_status = False  # ask for a report at the next poll (a jog just accepted)
         self._deadline = self._next_status = self._retry_at = self._heard = 0.0
         self._failures = 0
         self._last_wco: tuple[float, ...] | None = None
@@ -135,20 +114,30 @@ class GrblController:
         return self.status.speed
 
     @property
+    def target(self) -> dict[str, float] | None:
+        """Where the machine should go [mm]; None: stay."""
+        return self.motion.target
+
+    @property
+    def lamp_s(self) -> float:
+        """The lamp power asked for [S]."""
+        return self.motion.lamp_s
+
+    @property
     def busy(self) -> bool:
         """A move is under way: a jog on the machine, or one about to be sent."""
-        return self._jog is not None or (self.target is not None and not self._jogged)
+        return self.motion.busy
 
     def reached(self) -> bool:
         """Idle at the current target (two reports agree), nothing in flight."""
-        return (self.ready and self.target is not None and self._jog is None and self._jogged
-                and not self._queue and not self.counter.pending
-                and self.status.state == 'Idle' and self._settled >= SETTLED_REPORTS
-                and self._at(self.target))
+        m = self.motion
+        return (self.ready and m.target is not None and m.jog is None and m.jogged
+                and not m.queue and not self.counter.pending and self.status.state == 'Idle'
+                and self._settled >= SETTLED_REPORTS and m.at(m.target, self.position))
 
     def lamp_confirmed_off(self) -> bool:
         """Idle, and the controller accepted the lamp-off line (nothing left in flight)."""
-        return (self.ready and self._lamp_accepted == 0.0 and not self._queue
+        return (self.ready and self.motion.lamp_accepted == 0.0 and not self.motion.queue
                 and not self.counter.pending and self.status.state == 'Idle')
 
     # --- requests --------------------------------------------------------------------------
@@ -156,18 +145,16 @@ class GrblController:
     def goto(self, target: Mapping[str, float]) -> None:
         """Move to ``target`` (axis letter -> machine mm, checked against the travel); a jog to
         an older target is cancelled first (once GRBL allows it)."""
-        self.target = dict(target)
-        self._jogged = False
+        self.motion.goto(target)
         self.failure = None
 
     def set_lamp(self, power_s: float) -> None:
         """Lamp power in S units (0 = off); sent at the next Idle, where GRBL accepts G-code."""
-        self.lamp_s = power_s
+        self.motion.lamp_s = power_s
 
     def safe_stop(self) -> None:
         """No target and lamp off: a running jog is cancelled, then ``M5`` once Idle."""
-        self.target = None
-        self.lamp_s = 0.0
+        self.motion.stop()
 
     def estop(self) -> bool:
         """Feed hold, then soft reset: motion stops, the spindle (lamp) output goes off.
@@ -175,9 +162,9 @@ class GrblController:
         Returns:
             Whether the machine may have been moving (then its position may be lost).
         """
-        moving = self._jog is not None or self.status is None or self.status.state != 'Idle'
+        moving = self.motion.jog is not None or self.status is None \
+            or self.status.state != 'Idle'
         self.safe_stop()
-        self._jog = None
         if self.link is not None and self._write(grbl.FEED_HOLD) \
                 and self._write(grbl.SOFT_RESET):
             self._after_reset(self._now)
@@ -199,7 +186,7 @@ class GrblController:
             return f'not connected ({self.phase})'
         if self.settings.get(22) != 1.0:
             return f'homing is disabled on the controller ($22 = {self.settings.get(22)})'
-        if self._jog is not None or self.counter.pending:
+        if self.motion.jog is not None or self.counter.pending:
             return 'the machine is busy; stop it first'
         self.safe_stop()
         self._send_line('$H')
@@ -243,9 +230,9 @@ class GrblController:
                 self.counter.in_flight:  # GRBL does not answer ? while homing
             self._lost(f'no answer from the controller for {SILENCE_S:g} s')
         elif self.phase == READY:
-            if now >= self._next_status or self._ask_status:
+            if now >= self._next_status or self.motion.ask_status:
                 self._next_status = now + self.status_period_s
-                self._ask_status = False
+                self.motion.ask_status = False
                 self._write(grbl.STATUS)
             self._send_due()
         return self._events
@@ -262,9 +249,7 @@ class GrblController:
 
     def _after_reset(self, now: float) -> None:
         self.counter.clear()
-        self._queue.clear()
-        self._lamp_accepted = None
-        self._jog = None
+        self.motion.forget()
         self.status = self.position = None
         self._filter.reset()
         self._settled = 0
@@ -294,8 +279,7 @@ class GrblController:
             self._on_status(event)
         elif isinstance(event, grbl.Alarm):
             self.alarm = event.code
-            self._jog = None
-            self._queue.clear()
+            self.motion.forget()  # GRBL flushed its planner
             text = grbl.alarm_text(event.code)
             self._fail(text, position_lost=event.code in grbl.POSITION_LOST_ALARMS)
             self.log.warn('grbl:alarm', f'gantry: {text}. The driver never unlocks an alarm: '
@@ -311,27 +295,21 @@ class GrblController:
         sent = self.counter.acknowledged()
         if sent is None:
             return  # an answer to nothing of ours (e.g. a line sent before a reset)
-        if isinstance(event, grbl.Error):
+        ok = isinstance(event, grbl.Ok)
+        self.motion.answered(sent, ok)
+        if not ok:
             text = f'{sent!r} refused: error:{event.code} ({event.meaning})'
+            self.log.warn(f'grbl:error:{event.code}', f'gantry: {text}')
             if sent in ('$X', '$H', '$$'):
-                self.failure = text
-                self.log.warn(f'grbl:error:{event.code}', f'gantry: {text}')
-            else:  # a jog or the lamp: the move it belonged to is over
-                if sent.startswith('$J='):
-                    self._jog = None
-                self._fail(text)
-                self.log.warn(f'grbl:error:{event.code}', f'gantry: {text}')
-        elif sent.startswith('$J=') and self._jog is not None and self._jog.phase == SENT:
-            self._jog.phase = ACCEPTED
-            self._ask_status = True  # learn soon whether it runs (a newer target may wait)
+                self.failure = text  # a person's request, or the settings: nothing moved
+            else:
+                self._fail(text)  # a jog or the lamp: the move it belonged to is over
         elif sent == '$H':
             self.failure = None
             self._filter.reset()  # homing sets the machine position: no plausible path to it
             self._events.append(Homed())
         elif sent == '$X':
             self.failure = None
-        elif sent.startswith('M'):
-            self._lamp_accepted = 0.0 if sent == 'M5' else float(sent.split('S')[1])
         if self.phase == CONFIGURING and sent == '$$':
             self._configured()
 
@@ -351,7 +329,7 @@ class GrblController:
         self._next_status = self._heard = self._now
         self.log.info(f'gantry: GRBL {self.version} ready ({len(self.settings)} settings '
                       f'checked against the calibration)')
-        self._queue.append('M5')  # whatever the controller did before, the lamp starts off
+        self.motion.queue.append('M5')  # whatever the controller did before, the lamp is off
 
     def _on_status(self, status: grbl.Status) -> None:
         if status.wco is not None:
@@ -376,63 +354,27 @@ class GrblController:
         self._settled = (self._settled + 1 if same else 1) if status.state == 'Idle' else 0
         if status.state == 'Alarm' and self.alarm is None:
             self.alarm = 0  # in alarm without a code (e.g. after power-up with homing enabled)
-            self._jog = None
+            self.motion.forget()
             self._fail(grbl.alarm_text(None), position_lost=True)
             self.log.warn('grbl:alarm', f'gantry: {grbl.alarm_text(None)}; the driver never '
                           f'unlocks it: check the machine, then call gantry/unlock (or '
                           f'gantry/home).')
         elif status.state != 'Alarm' and self.alarm is not None:
             self.alarm = None  # left by $X or $H
-        self._follow_jog(status.state)
-
-    def _follow_jog(self, state: str) -> None:
-        """Where the one jog is in its life, from a believed report after its ``ok``."""
-        jog = self._jog
-        if jog is None or jog.phase == SENT:
-            return  # before its ok, a report says nothing about it
-        if state == 'Jog':
-            if jog.phase == ACCEPTED:
-                jog.phase = RUNNING
-        elif state == 'Idle':
-            if jog.phase == CANCELLING:
-                self._jog = None  # cancelled: the newest target goes next
-            elif self._settled >= SETTLED_REPORTS:
-                self._jog = None
-                if not self._at(jog.target):
-                    self._fail(f'the jog to {_mm(jog.target)} stopped at '
-                               f'{_mm(self.position)} without a cancel of ours (a hold or a '
-                               f'door on the machine?); not retried')
-        elif state != 'Alarm':  # an alarm is reported by its own line
-            self._jog = None
-            self._fail(f'the controller went {state} during a jog')
+        problem = self.motion.reported(status.state, self.position, self._settled)
+        if problem:
+            self._fail(problem)
 
     def _send_due(self) -> None:
-        """Cancel a superseded jog when GRBL allows it; send G-code and the next jog at Idle."""
+        """Write what the motion asks for (a jog cancel, a lamp line, the next jog)."""
         if self.alarm is not None or self.status is None:
             return
-        jog = self._jog
-        if jog is not None:
-            if jog.target != self.target and jog.phase == RUNNING \
-                    and self.status.state == 'Jog':
-                if self._write(grbl.JOG_CANCEL):
-                    jog.phase = CANCELLING
-            return
-        if self.status.state != 'Idle' or self.counter.pending:
-            return  # one line in flight at a time
-        if self._lamp_accepted != self.lamp_s and not self._queue:
-            self._queue.append(grbl.lamp_line(self.lamp_s))
-        if self._queue:
-            self._send_line(self._queue.pop(0))
-        elif self.target is not None and not self._jogged:
-            self._jogged = True
-            if not (self._settled >= SETTLED_REPORTS and self._at(self.target)):
-                self._jog = Jog(dict(self.target))
-                self._send_line(grbl.jog_line(self.target, self.cal.feed_mm_min))
-
-    def _at(self, target: Mapping[str, float]) -> bool:
-        return self.position is not None and all(
-            abs(self.position[a] - v) <= self.cal.position_tolerance_mm
-            for a, v in target.items())
+        due = self.motion.due(self.status.state, self.position, self._settled,
+                              self.counter.pending)
+        if isinstance(due, bytes):
+            self._write(due)
+        elif due is not None:
+            self._send_line(due)
 
     def _max_rate(self) -> float:
         """The fastest the machine can move [mm/min]: its max rates and homing seek rate."""
@@ -467,8 +409,7 @@ class GrblController:
         self.phase = OFFLINE
         self.status = self.position = None
         self._filter.reset()
-        self._jog = None
-        self._queue.clear()
+        self.motion.forget()
         self.counter.clear()
         self._fail(f'link lost: {reason}', position_lost=True)
         self._schedule_retry(reason)
@@ -481,8 +422,3 @@ class GrblController:
                       f'the controller answers again (a reconnection resets it, lamp off); '
                       f'retrying in {delay:g} s')
 
-
-def _mm(position: Mapping[str, float] | None) -> str:
-    if position is None:
-        return 'an unknown position'
-    return ', '.join(f'{axis} {value:.3f}' for axis, value in sorted(position.items())) + ' mm'
