@@ -21,7 +21,8 @@ What it models:
   had completed first): it comes back Idle, no alarm;
 - jogs (``$J=``, G20/G21/G53/G90/G91, F required, Idle or Jog only, soft-limit error:15),
   G0/G1/M3/M4/M5/S (S reported 0 after M5), alarms that only ``$X`` or ``$H`` leave, laser mode,
-  motion in time (``speedup`` times faster than real time, distances unchanged);
+  motion in time (``speedup`` times faster than real time, distances unchanged: ``$$`` reports
+  the rates and accelerations of that faster machine, so a driver's physics checks hold);
 - faults: ``trigger_alarm``, ``unplug``/``replug``, ``restart`` (power glitch: banner, position
   0), ``reject_next`` (error codes), ``damage`` (a function that may rewrite a status line).
 """

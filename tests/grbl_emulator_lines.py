@@ -11,6 +11,10 @@ from __future__ import annotations
 import re
 
 WORD = re.compile(r'([A-Z])(-?\d*\.?\d+)')
+# Settings in time units, as ``$$`` reports them for a machine ``speedup`` times faster: max and
+# homing rates (mm/min) scale with it, accelerations (mm/s^2) with its square.
+SCALED = {**{n: (lambda k: k) for n in (24, 25, 110, 111, 112)},
+          **{n: (lambda k: k * k) for n in (120, 121, 122)}}
 
 
 class GrblLines:
@@ -23,6 +27,8 @@ class GrblLines:
             if self.state in ('Run',) or self.state.startswith('Hold'):
                 return 8
             for number, value in sorted(self.settings.items()):
+                # The machine emulated moves ``speedup`` times faster: so do its rates.
+                value *= SCALED.get(number, lambda k: 1.0)(self.speedup)
                 text = f'{value:.3f}'.rstrip('0').rstrip('.') if value % 1 else f'{value:.0f}'
                 self._send(f'${number}={text}\r\n')
             return None

@@ -49,7 +49,7 @@ class Motion:
         self.jog: Jog | None = None
         self.jogged = False  # the target's one jog was sent (or was not needed)
         self.queue: list[str] = []  # G-code waiting for Idle
-        self.ask_status = False  # a jog was just accepted: a report soon says if it runs
+        self.ask_status = False  # ask GRBL for a report now, not at the next period
 
     @property
     def busy(self) -> bool:
@@ -98,7 +98,9 @@ class Motion:
         elif state == 'Idle':
             if jog.phase == CANCELLING:
                 self.jog = None  # cancelled: the newest target goes next
-            elif settled >= SETTLED_REPORTS:
+            elif settled < SETTLED_REPORTS:
+                self.ask_status = True  # a second report at once, to confirm where it stopped
+            else:
                 self.jog = None
                 if not self.at(jog.target, position):
                     return (f'the jog to {mm(jog.target)} stopped at {mm(position)} without a '

@@ -76,7 +76,8 @@ class Safety:
         if c.status is None:
             return 'no status report from the controller yet'
         if relative and not self.position_known:
-            return f'{self.position_doubt}: a relative action needs it; {REESTABLISH}'
+            return f'{self.position_doubt}; it must be re-established before a relative ' \
+                f'action: {REESTABLISH}'
         return ''
 
     def accepted(self, now: float, placing: bool) -> None:
