@@ -174,7 +174,7 @@ def flood(h: Harness, rng: np.random.Generator) -> bool:
     Stats.flood_overrun = max([Stats.flood_overrun, *overrun])
     return (abs(h.grbl.mpos[0] - (X0 + 1000.0 * xs[-1])) <= 0.05
             and h.grbl.spindle == ('M3', 1000.0)
-            and not {'ignored', 'repeat'} & set(h.grbl.cancels)
+            and not {'early', 'ignored', 'repeat'} & set(h.grbl.cancels)
             and all(t < 0.25 for t in overrun))
 
 

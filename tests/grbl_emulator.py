@@ -8,8 +8,9 @@ What it models:
 - the start-up banner after power-up, a soft reset, a replug or a restart; machine position 0
   after power-up (no homing); with ``$22=1`` power-up in Alarm (``[MSG:'$H'|'$X' to unlock]``);
 - the 128-byte receive buffer: bytes beyond it are lost (``overflowed`` is set), one ``ok`` or
-  ``error:N`` per line once parsed (an empty line gets ``ok``), an ``ok`` waits while the
-  15-block planner is full;
+  ``error:N`` per line once parsed, ``parse_s`` after its end arrived (GRBL's jogging doc: 1 to
+  5 ms to parse and plan a line; real-time bytes act at once, before it), an empty line gets
+  ``ok``, an ``ok`` waits while the 15-block planner is full;
 - real-time bytes: ``?`` a report; ``!`` a feed hold (Jog: the jog is cancelled; Run: Hold:1
   while decelerating, then Hold:0; Idle: Hold:0, suspended until ``~``); ``~`` resume; ``0x85``
   jog cancel, ignored unless in the Jog state and not already cancelling ("Command is ignored,
@@ -76,12 +77,13 @@ class GrblEmulator(GrblLines):
 
     def __init__(self, settings: dict[int, float] | None = None, *, speedup: float = 1.0,
                  version: str = '1.1h', link_dir: str | os.PathLike | None = None,
-                 reset_alarm: bool = True,
+                 reset_alarm: bool = True, parse_s: float = 0.003,
                  damage: Callable[[str], str | None] | None = None) -> None:
         self.settings = {**DEFAULTS, **(settings or {})}
         self.speedup = speedup
         self.version = version
         self.reset_alarm = reset_alarm
+        self.parse_s = parse_s  # GRBL parses and plans a line in 1 to 5 ms (its jogging doc)
         self.damage = damage
         self.link = Path(link_dir) / 'ttyGRBL' if link_dir is not None else None
         self.received = b''
@@ -94,11 +96,13 @@ class GrblEmulator(GrblLines):
         self.spindle = ('M5', 0.0)  # (mode, S as reported: 0 while off)
         self.lamp_history: list[tuple[str, float]] = []
         self.jogs: list[dict] = []  # every jog planned: target, outcome, end time
-        self.cancels: list[str] = []  # what each jog cancel met (_cancel_outcome)
+        self.cancels: list[str] = []  # what each jog cancel met: cancelled, or ignored (early,
+        # late, repeat, ignored: see _cancel_outcome)
         self.damaged: list[tuple[str, str]] = []  # (status line, what was sent instead)
         self.reject_next: list[int] = []  # error codes to answer the next lines with (tests)
         self._lock = threading.RLock()
         self._rx = bytearray()
+        self._parsed_at: list[float] = []  # when each complete line in _rx is parsed
         self._blocks: list[dict] = []  # planned moves: target, rate [mm/min], jog record
         self._segment_start = 0.0
         self._from = self.mpos
@@ -154,6 +158,7 @@ class GrblEmulator(GrblLines):
         with self._lock:
             self._halt('power')
             self._rx.clear()
+            self._parsed_at.clear()
             self.mpos = self._from = (0.0, 0.0, 0.0)  # no homing: GRBL starts at 0
             self.spindle, self._programmed_s = ('M5', 0.0), 0.0
             homing = self.settings[22] == 1.0
@@ -217,6 +222,8 @@ class GrblEmulator(GrblLines):
                         self._realtime(byte)
                     elif len(self._rx) < RX_BUFFER:
                         self._rx.append(byte)
+                        if byte in (0x0A, 0x0D):
+                            self._parsed_at.append(time.monotonic() + self.parse_s)
                     else:
                         self.overflowed = True  # GRBL's ring buffer drops the byte
                 self.max_rx_used = max(self.max_rx_used, len(self._rx))
@@ -257,6 +264,8 @@ class GrblEmulator(GrblLines):
             return 'repeat'  # "already invoked and in-process": ignored
         if self.state == 'Jog':
             return 'cancelled'
+        if b'$J=' in self._rx:
+            return 'early'  # its jog is not parsed yet: written before the jog's ok
         ended = max((j['end'] for j in self.jogs if j['end'] is not None), default=None)
         # A cancel that crossed its jog's end on the wire is a race no driver can avoid.
         return 'late' if ended is not None and time.monotonic() - ended < LATE_S else 'ignored'
@@ -269,6 +278,7 @@ class GrblEmulator(GrblLines):
         alarm = moving or self.state == 'Alarm'
         self._halt('reset')
         self._rx.clear()
+        self._parsed_at.clear()
         self.spindle = ('M5', 0.0)
         if moving:
             self._send('ALARM:3\r\n')
@@ -382,8 +392,9 @@ class GrblEmulator(GrblLines):
     def _parse_lines(self) -> None:
         while len(self._blocks) < PLANNER_BLOCKS:
             end = next((i for i, b in enumerate(self._rx) if b in (0x0A, 0x0D)), None)
-            if end is None:
-                return
+            if end is None or time.monotonic() < self._parsed_at[0]:
+                return  # GRBL takes a few ms to parse and plan a line
+            self._parsed_at.pop(0)
             raw = bytes(self._rx[:end])
             del self._rx[:end + 1]
             line = raw.decode('ascii', 'replace').strip()
