@@ -148,7 +148,7 @@ def estop(moving: bool) -> Callable[[Harness, np.random.Generator], bool]:
         h.send(2, mode=convert.MODE_BEAM, x=0.5, width=0.2)
         h.until(lambda: h.results()[-1].step_id == 2)
         h.until(lambda: False, 0.3)
-        return 'e-stop' in h.results()[-1].info and not h.moves_after(mark) \
+        return h.results()[-1].info.startswith('error') and not h.moves_after(mark) \
             and h.grbl.spindle[0] == 'M5'
     return run
 

@@ -391,3 +391,41 @@ def test_suppressed_warnings_are_counted_in_the_log(tmp_path) -> None:
             rig.transport.warnings
     finally:
         rig.close()
+
+
+def test_an_error_inside_the_poll_never_raises_and_stops_the_machine(rig, monkeypatch) -> None:
+    """The timer callback must not raise: a driver in an unknown state is e-stopped and
+    latched until a person looks."""
+    rig.ready()
+    place(rig)
+
+    def broken(now: float) -> list:
+        raise KeyError('Z')
+    monkeypatch.setattr(rig.controller, 'poll', broken)
+    rig.node.poll()  # no exception
+    monkeypatch.undo()
+    assert rig.node.safety.estop_latched
+    assert any('internal error' in w and "KeyError: 'Z'" in w for w in rig.transport.warnings)
+    assert rig.run_until(lambda: held_reset(rig))
+
+
+def held_reset(rig: Rig) -> bool:
+    return bytes([0x21, 0x18]) in bytes(b for b in rig.grbl.realtime if b != 0x3F)
+
+
+def test_homing_waits_for_the_estop_latch_to_be_released(tmp_path) -> None:
+    rig = Rig(tmp_path, settings={22: 1})
+    try:
+        assert rig.run_until(lambda: rig.controller.alarm == 0)
+        assert call(rig, 'gantry/estop').success
+        refused = call(rig, 'gantry/home')
+        assert not refused.success and 'e-stop latched' in refused.message
+        assert '$H' not in rig.grbl.lines
+        assert rig.run_until(lambda: rig.controller.phase == 'ready' and rig.controller.status)
+        assert call(rig, 'gantry/unlock').success  # releases the latch and sends $X
+        assert rig.run_until(lambda: rig.grbl.state == 'Idle')
+        assert call(rig, 'gantry/home').success
+        assert rig.run_until(lambda: rig.node.safety.position_known)  # homing establishes it
+        assert rig.grbl.lines.count('$H') == 1
+    finally:
+        rig.close()

@@ -119,7 +119,7 @@ class GantryNode:
             self.safety.unlock(), 'unlocked (e-stop latch released, $X sent in alarm); nothing '
             'moves until a new command; re-home if the position is in doubt'))
         transport.serve(TRIGGER, 'gantry/home', lambda req: self._trigger(
-            self.controller.home(), 'homing ($H) sent'))
+            self.safety.home(), 'homing ($H) sent'))
         transport.create_timer(POLL_S, self.poll)
         seed = params.seed if params.seed >= 0 else secrets.randbits(63)
         self._start_recording(seed)

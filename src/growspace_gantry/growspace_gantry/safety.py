@@ -73,8 +73,8 @@ class Safety:
             return c.failure or f'the controller is {c.phase}'
         if c.alarm is not None:
             return f'{grbl.alarm_text(c.alarm)}; a person must call gantry/unlock or gantry/home'
-        if c.status is None:
-            return 'no status report from the controller yet'
+        if c.status is None or c.position is None:
+            return 'no status report with a machine position from the controller yet'
         if relative and not self.position_known:
             return f'{self.position_doubt}; it must be re-established before a relative ' \
                 f'action: {REESTABLISH}'
@@ -111,17 +111,24 @@ class Safety:
     # --- rule 4: only a person unlocks ----------------------------------------------------------
 
     def unlock(self) -> str:
-        """A person's gantry/unlock: releases the e-stop latch and sends ``$X`` in alarm.
+        """A person's gantry/unlock: releases the e-stop latch, and sends ``$X`` in alarm.
 
         Returns:
             '' (done) or why nothing was done.
         """
-        released = self.estop_latched
-        self.estop_latched = False
-        error = self.controller.unlock()
-        if released and error.startswith('not in alarm'):
-            return ''
-        return error
+        released, self.estop_latched = self.estop_latched, False
+        if released:
+            self.log.info('gantry: e-stop latch released by gantry/unlock; nothing moves until '
+                          'a new command')
+            if self.controller.alarm is None:
+                return ''
+        return self.controller.unlock()
+
+    def home(self) -> str:
+        """A person's gantry/home (``$H``); not while the e-stop is latched."""
+        if self.estop_latched:
+            return f'{LATCHED} (then home)'
+        return self.controller.home()
 
     def tick(self, now: float, events: list) -> None:
         """Apply rules 2 and 3 to one poll of the controller."""
