@@ -91,7 +91,7 @@ def test_a_step_that_fails_on_the_node_stops_the_replay_with_its_reason(tmp_path
         node.stop(signal.SIGINT)
     out, err = capsys.readouterr()
     assert code == 1
-    assert 'step 11/50 (step_id 11): FAILED' in err and 'episode over' in err
+    assert 'step 11/50 (step_id 11): FAILED' in err and 'episode over' in err, err
     if keep_going:
         assert '51 request(s) sent, 11 answered, 40 failed' in out
     else:

@@ -7,6 +7,7 @@ from collections.abc import Callable, Iterable
 import dataclasses
 import datetime
 import os
+import secrets
 import time
 from typing import Any
 
@@ -176,8 +177,8 @@ def play_steps(path: str | os.PathLike, *, episode: int | None = None, start_ste
         next_at = time.monotonic()
         for ep, plan in zip(episodes, plans):
             count = sum(1 for r in plan if r.topic == 'command')
-            say(f'episode {ep.index}: reset_id {ep.reset_id}, seed {ep.seed}, {count} '
-                f'request(s) after the reset')
+            say(f'episode {ep.index} (recorded reset_id {ep.reset_id}, seed {ep.seed}): reset '
+                f'as reset_id {plan[0].reset_id}, then {count} request(s)')
             for request in plan:
                 _wait_until(transport, next_at, request.what, say)
                 results.clear()
@@ -222,10 +223,13 @@ def _plan(ep: Episode, start: int, stop: int | None, say: Callable[[str], None])
     if ep.seed is None:
         say(f'warning: episode {ep.index} continued the random stream of the one before it '
             f'(no seed of its own): its reset may place the light elsewhere than recorded')
-    reset = types.new(types.RESET_REQUEST, reset_id=ep.reset_id, has_seed=ep.seed is not None,
+    # A fresh reset_id: the answers of this episode cannot be taken for a node's own (its
+    # start-up episode is reset_id 0, as the recording's first episode often is).
+    reset_id = secrets.randbits(63) | 1
+    reset = types.new(types.RESET_REQUEST, reset_id=reset_id, has_seed=ep.seed is not None,
                       seed=ep.seed or 0, challenge=ep.config.challenge,
                       setting=ep.config.setting)
-    plan = [_Request('reset', 'reset', reset, ep.reset_id, 0)]
+    plan = [_Request('reset', 'reset', reset, reset_id, 0)]
     chosen = [r for r in stepped if start <= r.result.step_id <= (stop or r.result.step_id)]
     if not chosen:
         raise ReplayError(f'episode {ep.index} has no step_id in {start}..{stop or "end"} '
@@ -237,7 +241,7 @@ def _plan(ep: Episode, start: int, stop: int | None, say: Callable[[str], None])
                           mode=light.mode, x=light.x, z=light.z, width=light.width,
                           radius=light.radius)
         plan.append(_Request(f'placement (the light after step_id {place.step_id})', 'command',
-                             place, ep.reset_id, int(place.step_id)))
+                             place, reset_id, int(place.step_id)))
     for n, record in enumerate(chosen, 1):
         step_id = int(record.result.step_id)
         command = next((c for c in record.commands if c.step_id == step_id), None)
@@ -245,7 +249,7 @@ def _plan(ep: Episode, start: int, stop: int | None, say: Callable[[str], None])
             raise ReplayError(f'episode {ep.index}, step_id {step_id}: its light/command is not '
                               f'in the recording')
         plan.append(_Request(f'step {n}/{len(chosen)} (step_id {step_id})', 'command',
-                             command, ep.reset_id, step_id))
+                             command, reset_id, step_id))
     return plan
 
 
