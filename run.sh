@@ -86,7 +86,8 @@ build() {
   # shellcheck disable=SC1091
   source "$ws/install/local_setup.bash"
   set -u
-  export PATH="$ROOT/$ws/install/growspace_sim/lib/growspace_sim:$PATH"  # as `ros2 run` finds them
+  # as `ros2 run` finds them: sim_node, teleop, ...; gantry_node, growspace-gantry-gcode
+  export PATH="$ROOT/$ws/install/growspace_sim/lib/growspace_sim:$ROOT/$ws/install/growspace_gantry/lib/growspace_gantry:$PATH"
 }
 
 # sandboxed CMD...: run CMD in a private network namespace holding only loopback, if the OS

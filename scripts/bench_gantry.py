@@ -2,8 +2,9 @@
 
 Method (fixed): gantry_node's logic (``GantryNode`` over the in-process transport, CDR included)
 runs in the main thread and the emulator in its own thread; ``time.thread_time()`` of the main
-thread counts the driver alone. A lockstep episode of random discrete actions (control, 50
-steps) with moves sped up ``--speedup`` times; per command = all driver CPU of the episode
+thread counts the driver alone. After a reset (which establishes the machine position),
+a lockstep episode of random discrete actions (control, 50 steps) with moves sped up
+``--speedup`` times; per command = all driver CPU of the episode
 (command handling, streaming, status parsing, polls while the machine moves, the answer) over
 the commands. Idle = the driver's CPU per second while nothing is commanded (polls at 100 Hz,
 status requests at 10 Hz). Best of ``--repeats``.
@@ -58,6 +59,9 @@ def episode(speedup: float, seed: int) -> tuple[float, float, float]:
                 node.poll()
                 time.sleep(0.01)  # the node's 100 Hz poll timer
         until(lambda: controller.ready)
+        t.inject('reset', types.new(types.RESET_REQUEST, reset_id=1, has_seed=True, seed=seed))
+        until(lambda: len(t.messages('step_result')) == 1)
+        assert t.messages('step_result')[-1].info == '', t.messages('step_result')[-1]
         rng = np.random.default_rng(seed)
         cpu, wall = time.thread_time(), time.perf_counter()
         for step_id in range(1, STEPS + 1):

@@ -1,25 +1,45 @@
 """A GRBL 1.1 controller on a pseudo-terminal, for the gantry tests only (never shipped).
 
-Written from GRBL 1.1's own documentation (the wiki's Interface, Commands, Jogging, Laser Mode
-and Configuration pages, its error and alarm tables) and from what a real GRBL 1.1h printed
+Written from GRBL 1.1's own documentation (the Interface, Commands, Jogging, Laser Mode and
+Configuration pages, its error and alarm tables) and from what a real GRBL 1.1h printed
 (shared/design/gantry.md), not from the driver: a shared mistake would otherwise pass.
-What it models: the start-up banner (power-up, soft reset, replug), one ok/error per line when
-the line is parsed, the 128-byte receive buffer and a 15-block planner (an ok waits while the
-planner is full), real-time bytes (? ! ~ 0x18 0x85), status reports honouring $10, jogs
-($J=, G53/G90/G91, F required, Idle or Jog only, soft-limit error:15), G0/G1/M3/M4/M5/S,
-alarms that only $X or $H leave, laser mode, motion in time (constant feed, ``speedup`` times
-faster than real time), an unplug (the host's reads fail) and a replug (a fresh controller).
+What it models:
+
+- the start-up banner after power-up, a soft reset, a replug or a restart; machine position 0
+  after power-up (no homing); with ``$22=1`` power-up in Alarm (``[MSG:'$H'|'$X' to unlock]``);
+- the 128-byte receive buffer: bytes beyond it are lost (``overflowed`` is set), one ``ok`` or
+  ``error:N`` per line once parsed, ``parse_s`` after its end arrived (GRBL's jogging doc: 1 to
+  5 ms to parse and plan a line; real-time bytes act at once, before it), an empty line gets
+  ``ok``, an ``ok`` waits while the 15-block planner is full;
+- real-time bytes: ``?`` a report; ``!`` a feed hold (Jog: the jog is cancelled; Run: Hold:1
+  while decelerating, then Hold:0; Idle: Hold:0, suspended until ``~``); ``~`` resume; ``0x85``
+  jog cancel, ignored unless in the Jog state and not already cancelling ("Command is ignored,
+  if not in a JOG state or if jog cancel is already invoked and in-process"); ``0x18`` reset;
+- deceleration: a hold or cancel stops after ``v / a`` (the block's rate, ``$120-$122``); a jog
+  cancel reports Jog until stopped, then flushes every jog queued meanwhile and goes Idle;
+- a reset while moving (Run, Jog, Home, or decelerating) raises ``ALARM:3`` and comes back in
+  Alarm; ``reset_alarm=False`` reproduces what GRBL 1.1h did in 2 of 6 e-stops here (the hold
+  had completed first): it comes back Idle, no alarm;
+- jogs (``$J=``, G20/G21/G53/G90/G91, F required, Idle or Jog only, soft-limit error:15),
+  G0/G1/M3/M4/M5/S (S reported 0 after M5), alarms that only ``$X`` or ``$H`` leave, laser mode,
+  motion in time (``speedup`` times faster than real time, distances unchanged: ``$$`` reports
+  the rates and accelerations of that faster machine, so a driver's physics checks hold);
+- faults: ``trigger_alarm``, ``unplug``/``replug``, ``restart`` (power glitch: banner, position
+  0), ``reject_next`` (error codes), ``damage`` (a function that may rewrite a status line).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import os
 from pathlib import Path
-import re
+import random
 import select
 import threading
 import time
 import tty
+
+from grbl_emulator_lines import GrblLines
 
 RX_BUFFER = 128
 PLANNER_BLOCKS = 15
@@ -29,17 +49,42 @@ DEFAULTS = {0: 10.0, 1: 25.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 10: 1.0, 1
             102: 250.0, 110: 500.0, 111: 500.0, 112: 500.0, 120: 10.0, 121: 10.0, 122: 10.0,
             130: 200.0, 131: 200.0, 132: 200.0}
 REALTIME = {0x3F, 0x21, 0x7E, 0x18, 0x85}
-WORD = re.compile(r'([A-Z])(-?\d*\.?\d+)')
+MOVING = ('Run', 'Jog', 'Home', 'Hold:1')
+LATE_S = 0.05  # a jog cancel this soon after a jog's end crossed it on the wire [s]
 
 
-class GrblEmulator:
+def random_damage(every: int, seed: int = 0) -> Callable[[str], str | None]:
+    """A ``damage`` knob: every ``every``-th status line gets one byte flipped, dropped or
+    inserted (seeded, so a run is repeatable)."""
+    rng = random.Random(seed)
+    count = 0
+
+    def damage(line: str) -> str | None:
+        nonlocal count
+        count += 1
+        if count % every:
+            return None
+        i = rng.randrange(len(line))
+        char = chr(rng.randrange(32, 127))
+        kind = rng.randrange(3)
+        return line[:i] + (char + line[i + 1:] if kind == 0 else line[i + 1:] if kind == 1
+                           else char + line[i:])
+    return damage
+
+
+class GrblEmulator(GrblLines):
     """One emulated controller. ``port`` is what the driver opens."""
 
     def __init__(self, settings: dict[int, float] | None = None, *, speedup: float = 1.0,
-                 version: str = '1.1h', link_dir: str | os.PathLike | None = None) -> None:
+                 version: str = '1.1h', link_dir: str | os.PathLike | None = None,
+                 reset_alarm: bool = True, parse_s: float = 0.003,
+                 damage: Callable[[str], str | None] | None = None) -> None:
         self.settings = {**DEFAULTS, **(settings or {})}
         self.speedup = speedup
         self.version = version
+        self.reset_alarm = reset_alarm
+        self.parse_s = parse_s  # GRBL parses and plans a line in 1 to 5 ms (its jogging doc)
+        self.damage = damage
         self.link = Path(link_dir) / 'ttyGRBL' if link_dir is not None else None
         self.received = b''
         self.lines: list[str] = []
@@ -48,23 +93,26 @@ class GrblEmulator:
         self.overflowed = False
         self.state = 'Idle'
         self.mpos = (0.0, 0.0, 0.0)
-        self.spindle = ('M5', 0.0)
+        self.spindle = ('M5', 0.0)  # (mode, S as reported: 0 while off)
         self.lamp_history: list[tuple[str, float]] = []
+        self.jogs: list[dict] = []  # every jog planned: target, outcome, end time
+        self.cancels: list[str] = []  # what each jog cancel met: cancelled, or ignored (early,
+        # late, repeat, ignored: see _cancel_outcome)
+        self.damaged: list[tuple[str, str]] = []  # (status line, what was sent instead)
         self.reject_next: list[int] = []  # error codes to answer the next lines with (tests)
         self._lock = threading.RLock()
         self._rx = bytearray()
-        self._blocks: list[dict] = []  # planned moves: target, rate [mm/min], jog
+        self._parsed_at: list[float] = []  # when each complete line in _rx is parsed
+        self._blocks: list[dict] = []  # planned moves: target, rate [mm/min], jog record
         self._segment_start = 0.0
         self._from = self.mpos
+        self._stopping: dict | None = None  # a hold or jog cancel decelerating
+        self._programmed_s = 0.0
         self._reports = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._master = self._slave = -1
         self.port = ''
-
-    @property
-    def laser_mode(self) -> bool:
-        return self.settings[32] == 1.0
 
     # --- life cycle ------------------------------------------------------------------------
 
@@ -108,9 +156,11 @@ class GrblEmulator:
 
     def _power_up(self) -> None:
         with self._lock:
-            self._blocks.clear()
+            self._halt('power')
             self._rx.clear()
-            self.spindle = ('M5', 0.0)
+            self._parsed_at.clear()
+            self.mpos = self._from = (0.0, 0.0, 0.0)  # no homing: GRBL starts at 0
+            self.spindle, self._programmed_s = ('M5', 0.0), 0.0
             homing = self.settings[22] == 1.0
             self.state = 'Alarm' if homing else 'Idle'
             self._send(f"\r\nGrbl {self.version} ['$' for help]\r\n")
@@ -121,7 +171,7 @@ class GrblEmulator:
 
     def trigger_alarm(self, code: int) -> None:
         with self._lock:
-            self._halt()
+            self._halt('alarm')
             self.state = 'Alarm'
             self._send(f'ALARM:{code}\r\n')
 
@@ -132,11 +182,14 @@ class GrblEmulator:
             self._master = self._slave = -1
 
     def replug(self) -> None:
+        """A fresh controller on the same path (its power went with the USB cable)."""
         with self._lock:
-            self.mpos = (0.0, 0.0, 0.0)
-            self._from = self.mpos
             self._open_pty()
             self._power_up()
+
+    def restart(self) -> None:
+        """The controller restarts on the same link (power glitch, reset button)."""
+        self._power_up()
 
     def wait_idle(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -161,16 +214,19 @@ class GrblEmulator:
                 data = b''  # the host closed its end: wait for it to reopen
                 time.sleep(0.005)
             with self._lock:
+                self._move()
                 for byte in data:
                     self.received += bytes([byte])
-                    if byte in REALTIME:
+                    if byte in REALTIME:  # picked off by the serial interrupt, never buffered
                         self.realtime.append(byte)
                         self._realtime(byte)
-                    else:
+                    elif len(self._rx) < RX_BUFFER:
                         self._rx.append(byte)
+                        if byte in (0x0A, 0x0D):
+                            self._parsed_at.append(time.monotonic() + self.parse_s)
+                    else:
+                        self.overflowed = True  # GRBL's ring buffer drops the byte
                 self.max_rx_used = max(self.max_rx_used, len(self._rx))
-                if len(self._rx) > RX_BUFFER:
-                    self.overflowed = True
                 self._move()
                 self._parse_lines()
 
@@ -184,37 +240,59 @@ class GrblEmulator:
     def _realtime(self, byte: int) -> None:
         if byte == 0x3F:
             self._status()
-        elif byte == 0x21:  # feed hold: a jog is cancelled, a cycle holds
+        elif byte == 0x21:  # feed hold
             if self.state == 'Jog':
-                self._halt()
-                self.state = 'Idle'
+                self._decelerate('cancel')
             elif self.state == 'Run':
-                self._halt(keep_blocks=True)
-                self.state = 'Hold:0'
-        elif byte == 0x7E and self.state.startswith('Hold'):
+                self._decelerate('hold')
+                self.state = 'Hold:1'
+            elif self.state == 'Idle':
+                self.state = 'Hold:0'  # suspended: nothing runs until ~
+        elif byte == 0x7E and self.state.startswith('Hold') and self._stopping is None:
             self.state = 'Run' if self._blocks else 'Idle'
             self._segment_start, self._from = time.monotonic(), self.mpos
-        elif byte == 0x85 and self.state == 'Jog':
-            self._halt()
-            self.state = 'Idle'
+        elif byte == 0x85:
+            self.cancels.append(self._cancel_outcome())
+            if self.cancels[-1] == 'cancelled':
+                self._decelerate('cancel')
         elif byte == 0x18:
-            moving = self.state in ('Run', 'Jog', 'Home') or self.state.startswith('Hold')
-            self._halt()
-            self._rx.clear()
-            self.spindle = ('M5', 0.0)
-            if moving:
-                self._send('ALARM:3\r\n')
-            alarm = moving or self.state == 'Alarm'
-            self._send(f"\r\nGrbl {self.version} ['$' for help]\r\n")
-            self.state = 'Alarm' if alarm else 'Idle'
-            if alarm:
-                self._send("[MSG:'$H'|'$X' to unlock]\r\n")
+            self._reset()
+
+    def _cancel_outcome(self) -> str:
+        """What a jog cancel meets: acted on, or ignored (and why, for the tests)."""
+        if self._stopping is not None:
+            return 'repeat'  # "already invoked and in-process": ignored
+        if self.state == 'Jog':
+            return 'cancelled'
+        if b'$J=' in self._rx:
+            return 'early'  # its jog is not parsed yet: written before the jog's ok
+        ended = max((j['end'] for j in self.jogs if j['end'] is not None), default=None)
+        # A cancel that crossed its jog's end on the wire is a race no driver can avoid.
+        return 'late' if ended is not None and time.monotonic() - ended < LATE_S else 'ignored'
+
+    def _reset(self) -> None:
+        moving = self.state in MOVING or self._stopping is not None
+        if moving and not self.reset_alarm:
+            self._finish_stop()  # the hold completed before the reset was handled
+            moving = False
+        alarm = moving or self.state == 'Alarm'
+        self._halt('reset')
+        self._rx.clear()
+        self._parsed_at.clear()
+        self.spindle = ('M5', 0.0)
+        if moving:
+            self._send('ALARM:3\r\n')
+        self._send(f"\r\nGrbl {self.version} ['$' for help]\r\n")
+        self.state = 'Alarm' if alarm else 'Idle'
+        if alarm:
+            self._send("[MSG:'$H'|'$X' to unlock]\r\n")
 
     def _status(self) -> None:
         mask = int(self.settings[10])
         x, y, z = self.mpos
         pos = f'{"MPos" if mask & 1 else "WPos"}:{x:.3f},{y:.3f},{z:.3f}'
-        feed = self._blocks[0]['rate'] if self._blocks and self.state in ('Run', 'Jog') else 0
+        moving = self._blocks and self.state in MOVING
+        feed = self._blocks[0]['rate'] if moving else 0
         fields = [self.state, pos]
         if mask & 2:
             fields.append(f'Bf:{PLANNER_BLOCKS - len(self._blocks)},{RX_BUFFER - len(self._rx)}')
@@ -224,26 +302,75 @@ class GrblEmulator:
             fields.append('WCO:0.000,0.000,0.000')
         if self.spindle[0] != 'M5':
             fields.append('A:' + ('S' if self.spindle[0] == 'M3' else 'C'))
-        self._send('<' + '|'.join(fields) + '>\r\n')
+        line = '<' + '|'.join(fields) + '>'
+        damaged = self.damage(line) if self.damage is not None else None
+        if damaged is not None:
+            self.damaged.append((line, damaged))
+            line = damaged
+        self._send(line + '\r\n')
 
-    def _halt(self, keep_blocks: bool = False) -> None:
+    # --- motion ----------------------------------------------------------------------------------
+
+    def _decelerate(self, kind: str) -> None:
+        """Start a hold or a jog cancel: the machine stops after v / a along its path."""
+        if self._stopping is not None:
+            return  # already invoked and in process: ignored
         self._move()
-        if not keep_blocks:
-            self._blocks.clear()
+        if not self._blocks:
+            return
+        block = self._blocks[0]
+        v = block['rate'] / 60.0  # mm/s, machine time
+        accel = min(self.settings[120], self.settings[121], self.settings[122])
+        remaining = _distance(block['target'], self.mpos)
+        stop = min(remaining, v * v / (2.0 * accel))
+        k = stop / remaining if remaining else 1.0
+        to = tuple(p + k * (t - p) for p, t in zip(self.mpos, block['target']))
+        duration = (2.0 * stop / v if v else 0.0) / self.speedup
+        self._stopping = {'kind': kind, 'from': self.mpos, 'to': to,
+                          't0': time.monotonic(), 'dur': duration}
+
+    def _finish_stop(self) -> None:
+        stopping, self._stopping = self._stopping, None
+        if stopping is None:
+            return
+        self.mpos = self._from = stopping['to']
+        if stopping['kind'] == 'cancel':  # flush every jog, the ones queued meanwhile too
+            self._halt('cancelled')
+            self.state = 'Idle'
+        else:
+            self.state = 'Hold:0'
+
+    def _halt(self, outcome: str) -> None:
+        """Stop where the machine is now and forget every planned block."""
+        self._stopping = None
+        self._move()
+        for block in self._blocks:
+            if block['jog'] is not None and block['jog']['outcome'] is None:
+                block['jog'].update(outcome=outcome, end=time.monotonic())
+        self._blocks.clear()
         self._from = self.mpos
 
     def _move(self) -> None:
         """Advance motion to now, block after block, at each block's constant rate."""
         now = time.monotonic()
+        if self._stopping is not None:
+            s = self._stopping
+            k = min(1.0, (now - s['t0']) / s['dur']) if s['dur'] > 0 else 1.0
+            self.mpos = tuple(f + k * (t - f) for f, t in zip(s['from'], s['to']))
+            if k >= 1.0:
+                self._finish_stop()
+            return
         while self._blocks and self.state in ('Run', 'Jog'):
             block = self._blocks[0]
             target = block['target']
-            dist = sum((t - f) ** 2 for t, f in zip(target, self._from)) ** 0.5
-            speed = block['rate'] / 60.0 * self.speedup  # mm/s
+            dist = _distance(target, self._from)
+            speed = block['rate'] / 60.0 * self.speedup  # mm per real second
             elapsed = now - self._segment_start
             if dist == 0 or elapsed * speed >= dist:
                 self.mpos = self._from = target
                 self._blocks.pop(0)
+                if block['jog'] is not None:
+                    block['jog'].update(outcome='done', end=now)
                 self._segment_start += dist / speed if dist else 0.0
                 continue
             k = elapsed * speed / dist
@@ -252,132 +379,32 @@ class GrblEmulator:
         if not self._blocks and self.state in ('Run', 'Jog'):
             self.state = 'Idle'
 
-    def _parse_lines(self) -> None:
-        while b'\n' in self._rx and len(self._blocks) < PLANNER_BLOCKS:
-            raw, _, rest = bytes(self._rx).partition(b'\n')
-            self._rx[:] = rest
-            line = raw.decode('ascii', 'replace').replace('\r', '').strip()
-            self.lines.append(line)
-            if not line:
-                continue
-            if self.reject_next:
-                self._send(f'error:{self.reject_next.pop(0)}\r\n')
-                continue
-            error = self._execute(line.replace(' ', '').upper())
-            self._send('ok\r\n' if error is None else f'error:{error}\r\n')
-
-    # --- lines ---------------------------------------------------------------------------------
-
-    def _execute(self, line: str) -> int | None:
-        if len(line) > 80:
-            return 11
-        if line == '$$':
-            for number, value in sorted(self.settings.items()):
-                text = f'{value:.3f}'.rstrip('0').rstrip('.') if value % 1 else f'{value:.0f}'
-                self._send(f'${number}={text}\r\n')
-            return None
-        if line == '$X':
-            if self.state == 'Alarm':
-                self._send('[MSG:Caution: Unlocked]\r\n')
-                self.state = 'Idle'
-            return None
-        if line == '$H':
-            if self.settings[22] != 1.0:
-                return 5
-            self.mpos = self._from = (0.0, 0.0, 0.0)
-            self.state = 'Idle'
-            return None
-        if line == '$I':
-            self._send(f'[VER:{self.version}.20190825:]\r\n[OPT:V,15,128]\r\n')
-            return None
-        if line.startswith('$J='):
-            return self._jog(line[3:])
-        match = re.fullmatch(r'\$(\d+)=(-?\d*\.?\d+)', line)
-        if match:
-            if self.state != 'Idle':
-                return 8
-            self.settings[int(match.group(1))] = float(match.group(2))
-            return None
-        if line.startswith('$'):
-            return 3
-        if self.state in ('Alarm', 'Jog'):
-            return 9  # G-code locked out during alarm or jog state
-        return self._gcode(line)
-
-    def _words(self, text: str) -> list[tuple[str, float]] | None:
-        words = WORD.findall(text)
-        if ''.join(f'{a}{b}' for a, b in words) != text:
-            return None
-        return [(a, float(b)) for a, b in words]
-
-    def _target(self, words: list[tuple[str, float]], relative: bool, inches: bool,
-                ) -> tuple[float, ...]:
-        scale = 25.4 if inches else 1.0
-        target = list(self.mpos if not self._blocks else self._blocks[-1]['target'])
-        for letter, value in words:
-            if letter in 'XYZ':
-                i = 'XYZ'.index(letter)
-                target[i] = target[i] + value * scale if relative else value * scale
-        return tuple(target)
-
-    def _within_travel(self, target: tuple[float, ...]) -> bool:
-        return all(-self.settings[130 + i] <= v <= 0.0 for i, v in enumerate(target))
-
-    def _jog(self, text: str) -> int | None:
-        if self.state not in ('Idle', 'Jog'):
-            return 9 if self.state == 'Alarm' else 8
-        words = self._words(text)
-        if words is None:
-            return 2
-        g = [v for a, v in words if a == 'G']
-        if any(v not in (20, 21, 53, 90, 91) for v in g) or any(
-                a not in 'GXYZF' for a, _ in words):
-            return 16
-        feed = [v for a, v in words if a == 'F']
-        if not feed:
-            return 22
-        target = self._target(words, relative=91 in g and 53 not in g, inches=20 in g)
-        if self.settings[20] == 1.0 and not self._within_travel(target):
-            return 15
-        self._plan(target, min(feed[0] * (25.4 if 20 in g else 1.0), self._max_rate()), 'Jog')
-        return None
-
-    def _gcode(self, line: str) -> int | None:
-        words = self._words(line)
-        if words is None:
-            return 1
-        codes = {(a, v) for a, v in words if a in 'GM'}
-        known = {('G', 0), ('G', 1), ('G', 21), ('G', 90), ('G', 94), ('M', 3), ('M', 4),
-                 ('M', 5)}
-        if codes - known:
-            return 20
-        s = [v for a, v in words if a == 'S']
-        if ('M', 5) in codes:
-            self.spindle = ('M5', s[0] if s else self.spindle[1])
-        elif ('M', 3) in codes or ('M', 4) in codes:
-            self.spindle = ('M3' if ('M', 3) in codes else 'M4', s[0] if s else self.spindle[1])
-        elif s:
-            self.spindle = (self.spindle[0], s[0])
-        self.lamp_history.append(self.spindle)
-        if any(a in 'XYZ' for a, _ in words):
-            target = self._target(words, relative=False, inches=False)
-            if self.settings[20] == 1.0 and not self._within_travel(target):
-                self._halt()
-                self.state = 'Alarm'
-                self._send('ALARM:2\r\n')
-                return None
-            feed = [v for a, v in words if a == 'F']
-            rate = self._max_rate() if ('G', 1) not in codes else (feed[0] if feed else 0)
-            if not rate:
-                return 22
-            self._plan(target, min(rate, self._max_rate()), 'Run')
-        return None
-
-    def _max_rate(self) -> float:
-        return min(self.settings[110], self.settings[111], self.settings[112])
-
-    def _plan(self, target: tuple[float, ...], rate: float, state: str) -> None:
+    def _plan(self, target: tuple[float, ...], rate: float, state: str,
+              jog: dict | None = None) -> None:
         if not self._blocks:
             self._segment_start, self._from = time.monotonic(), self.mpos
-        self._blocks.append({'target': target, 'rate': rate})
-        self.state = state
+        self._blocks.append({'target': target, 'rate': rate, 'jog': jog})
+        if self.state == 'Idle':
+            self.state = state
+
+    # --- lines -----------------------------------------------------------------------------------
+
+    def _parse_lines(self) -> None:
+        while len(self._blocks) < PLANNER_BLOCKS:
+            end = next((i for i, b in enumerate(self._rx) if b in (0x0A, 0x0D)), None)
+            if end is None or time.monotonic() < self._parsed_at[0]:
+                return  # GRBL takes a few ms to parse and plan a line
+            self._parsed_at.pop(0)
+            raw = bytes(self._rx[:end])
+            del self._rx[:end + 1]
+            line = raw.decode('ascii', 'replace').strip()
+            self.lines.append(line)
+            if self.reject_next and line:
+                self._send(f'error:{self.reject_next.pop(0)}\r\n')
+                continue
+            error = self._execute(line.replace(' ', '').upper()) if line else None
+            self._send('ok\r\n' if error is None else f'error:{error}\r\n')
+
+
+def _distance(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    return sum((x - y) ** 2 for x, y in zip(a, b)) ** 0.5

@@ -57,7 +57,7 @@ def test_one_shifted_step_is_found_with_its_size_and_place(tmp_path):
     shifted_copy(tmp_path / 'a.mcap', tmp_path / 'b.mcap', step_id=7, dx=0.003)
     result = compare(tmp_path / 'a.mcap', tmp_path / 'b.mcap')
     x = result.errors['x']
-    assert x.max_abs == pytest.approx(0.003) and x.worst == 'episode 1, step 7'
+    assert x.max_abs == pytest.approx(0.003) and x.worst == 'episode 1, step_id 7'
     assert x.rms == pytest.approx(0.003 / math.sqrt(102))
     assert result.errors['width'].max_abs == 0.0
     assert main(['compare', str(tmp_path / 'a.mcap'), str(tmp_path / 'b.mcap'),
@@ -81,3 +81,41 @@ def test_a_challenge_with_another_light_is_not_compared(tmp_path, capsys):
     assert 'light mode 0 in A, 1 in B' in result.skipped[0]
     assert main(['compare', str(tmp_path / 'a.mcap'), str(tmp_path / 'b.mcap')]) == 1
     assert 'no step of A and B could be compared' in capsys.readouterr().err
+
+
+def hardware_like_copy(src: Path, dst: Path, failed: set[int]) -> None:
+    """A copy as the gantry records a replay whose steps ``failed`` were refused: their
+    step_result has an error and no observation before it, and ``step`` counts the answered
+    steps only."""
+    with Bag(src) as bag, McapRecorder(dst) as out:
+        channels = {t: out.add_channel(t, i.typename, i.qos) for t, i in bag.topics.items()}
+        for name, data in bag.metadata.items():
+            out.add_metadata(name, data)
+        held = []  # a step's observations, written with its result unless it failed
+        for m in bag.messages():
+            if m.topic.endswith(('/light/state', '/camera/image_raw', '/plant/state')):
+                held.append(m)
+                continue
+            data = m.data
+            if m.topic.endswith('/step_result'):
+                msg = m.decode()
+                if msg.step_id in failed:
+                    msg.info = 'error: superseded by a newer command'
+                    held = []
+                msg.step -= sum(1 for f in failed if f <= msg.step_id)
+                data = types.serialize(msg, m.typename)
+            for h in held:
+                out.write(channels[h.topic], h.data, h.log_time, h.publish_time)
+            held = []
+            out.write(channels[m.topic], data, m.log_time, m.publish_time)
+
+
+def test_runs_are_matched_by_step_id_not_by_order(tmp_path):
+    """Steps 1-4 refused on the hardware side: every later step is still compared with its own
+    step_id (not with the one four steps earlier), and the missing ones are listed."""
+    record(tmp_path / 'a.mcap', 'control', seeds=(4,))
+    hardware_like_copy(tmp_path / 'a.mcap', tmp_path / 'b.mcap', {1, 2, 3, 4})
+    result = compare(tmp_path / 'a.mcap', tmp_path / 'b.mcap')
+    assert result.steps == 51 - 4
+    assert all(e.max_abs == 0.0 for e in result.errors.values()), result.errors
+    assert result.unmatched == ['episode 0, step_id 1-4: only in A']

@@ -44,9 +44,10 @@ def load_cal(**changes: Any) -> calibration.Calibration:
 class Rig:
     """An emulated controller, a gantry node on a fake transport, and helpers to drive them."""
 
-    def __init__(self, tmp_path, settings=None, cal=None, **params: Any) -> None:
-        self.grbl = GrblEmulator({**RIG, **(settings or {})}, speedup=SPEEDUP,
-                                 link_dir=tmp_path).start()
+    def __init__(self, tmp_path, settings=None, cal=None, emulator: dict | None = None,
+                 **params: Any) -> None:
+        self.grbl = GrblEmulator({**RIG, **(settings or {})}, link_dir=tmp_path,
+                                 **{'speedup': SPEEDUP, **(emulator or {})}).start()
         self.transport = FakeTransport('growspace_gantry')
         self.cal = cal or load_cal()
         t = self.transport

@@ -45,7 +45,35 @@ def test_status_fields_by_name_in_any_order() -> None:
     assert w.machine_position(None) is None
     assert w.machine_position((10.0, 0.0, -1.0)) == (11.0, 1.0, 0.0)
     for state in grbl.STATES:
-        assert grbl.parse_line(f'<{state}|MPos:0,0,0>').state == state
+        assert grbl.parse_line(f'<{state}|MPos:0.000,0.000,0.000>').state == state
+
+
+@pytest.mark.parametrize('line', [
+    '<Idle|MPos:-425.000,-300.000|FS:0,0>',  # two coordinates (seen on real GRBL output)
+    '<Idle|MPos:-425.000,0.000,-300.000,1.000,2.000,3.000,4.000|FS:0,0>',  # seven
+    '<Idle|MPos:-2,75.000,0.000,-300.000|FS:0,0>',  # a comma inserted: -2 has no decimals
+    '<Idle|MPos:-425.0000.000,-300.000|FS:0,0>',  # a comma dropped
+    '<Idle|MPos:-425.000,0.000,-300.000|FS:1000>',  # FS with one number
+    '<Idle|MPos:-425.000,0.000,-300.000|Bf:15>',  # Bf with one count
+    '<Idle|MPos:-425.000,0.000,-300.000|WCO:0.000,0.000>',  # WCO: fewer axes than MPos
+    '<Idle|FS:0,0>',  # no position at all
+    '<Idle|MPos:1.000,0.000,0.000|WPos:1.000,0.000,0.000>',  # both positions
+    '<Idle|MPos:1.000,0.000,0.000|MPos:2.000,0.000,0.000>',  # a field twice
+    '<Idle|MPos1.000,0.000,0.000>',  # a field without its colon
+    '<Idle:0|MPos:1.000,0.000,0.000>',  # a substate on a state that has none
+    '<Hold:7|MPos:1.000,0.000,0.000>',  # an unknown substate
+    '<Idle|MPos:nan,0.000,0.000>', '<Idle|MPos:1e3,0.000,0.000>',
+])
+def test_a_status_field_of_the_wrong_count_or_form_makes_the_line_unknown(line) -> None:
+    assert isinstance(grbl.parse_line(line), grbl.Unknown)
+
+
+def test_other_answers_are_checked_whole() -> None:
+    for line in ('error:', 'error:9x', 'ALARM:', 'ALARM:3.', '$110=6000x', '$110='):
+        assert isinstance(grbl.parse_line(line), grbl.Unknown), line
+    assert grbl.alarm_text(3).startswith('ALARM:3 (reset while in motion')
+    assert grbl.alarm_text(0).startswith('alarm (no code)')
+    assert grbl.alarm_text(None).startswith('alarm (no code)')
 
 
 def test_lines_we_build() -> None:

@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
 import time
+from typing import Any
 
 from ament_index_python.packages import get_package_prefix
-import numpy as np
 import pytest
+import yaml
 
 from grbl_emulator import GrblEmulator
+from growspace_gantry.main import default_calibration
 from growspace_gym_bridge.link import ChamberLink
 from growspace_sim.node.rclpy_transport import RclpyTransport
 from growspace_sim.replay import compare, format_comparison
@@ -89,66 +90,58 @@ def test_invalid_calibration_exits_2_naming_the_key(grbl: GrblEmulator, tmp_path
     assert grbl.lines == []  # nothing was sent
 
 
-def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
-    """``growspace-replay play --only light/command --step-period`` drives the gantry through
-    a sample oracle episode; the reached light matches the simulator's within the tolerance."""
-    from growspace_sim.replay.play import play
-    from growspace_sim.replay.bag import Bag
+BAG = os.path.join(os.path.dirname(__file__), '..', 'bags', 'oracle_control_hard.mcap')
 
-    bag = os.path.join(os.path.dirname(__file__), '..', 'bags', 'oracle_control_hard.mcap')
-    with Bag(bag) as b:
-        sim_lights = {m.step_id: m for m in (x.decode() for x in
-                                             b.messages(['/growspace/light/state']))}
-    # Each step must be answered within the period (a status report at Idle on target), also
-    # on a loaded CI machine: fast moves, 50 Hz status, 0.3 s per step.
+
+def replay_onto_gantry(tmp_path, *params: str, **play: Any) -> Any:
+    """Start gantry_node (seed 5: not the bag's) on an emulated GRBL, wait until it stands
+    Idle, replay the sample episode step by step onto it; returns the replay's report."""
+    from growspace_sim.replay.play import play_steps
+
     with GrblEmulator(RIG, speedup=400.0, link_dir=tmp_path) as grbl:
-        node = NodeProcess('-p', f'port:={grbl.port}', '-p', 'seed:=2024', '-p',
-                           'challenge:=control', '-p', 'setting:=hard', '-p', 'status_hz:=50.0',
-                           '-p', f'record_path:={tmp_path / "hardware.mcap"}',
-                           namespace='/growspace',
-                           executable=gantry_executable())
+        node = NodeProcess('-p', f'port:={grbl.port}', '-p', 'seed:=5', '-p', 'status_hz:=50.0',
+                           '-p', f'record_path:={tmp_path / "hardware.mcap"}', *params,
+                           namespace='/growspace', executable=gantry_executable())
         listener = RclpyTransport('replay_listener', '/growspace')
-        reached, results = {}, []
         try:
-            listener.subscribe(types.LIGHT_COMMAND, 'light/state', COMMAND_QOS,
-                               lambda m, _: reached.__setitem__(m.step_id, m))
-            listener.subscribe(types.STEP_RESULT, 'step_result', COMMAND_QOS,
-                               lambda m, _: results.append(m))
-            ready: list = []  # gantry/status (1 Hz and on change) at level OK: Idle, connected
+            idle: list = []
             listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status',
-                               COMMAND_QOS, lambda m, _: ready.extend(
-                                   s for s in m.status if s.level == 0))
+                               COMMAND_QOS, lambda m, _: idle.extend(
+                                   s for s in m.status if s.message.startswith('Idle')))
             deadline = time.monotonic() + 20.0
-            while not (listener.matched('step_result') and ready) \
-                    and time.monotonic() < deadline:
+            while not idle and time.monotonic() < deadline:
                 listener.spin_once(0.05)
-            assert ready, 'the gantry never reported itself ready'
-            played: list = []
-
-            def replay() -> None:
-                try:
-                    played.append(play(bag, topics=['/growspace/light/command'],
-                                            step_period_s=0.3, wait_for_subscribers_s=10.0))
-                except Exception as e:  # noqa: BLE001 - shown by the assertion below
-                    played.append(e)
-            thread = threading.Thread(target=replay)
-            thread.start()
-            deadline = time.monotonic() + 40.0
-            while (thread.is_alive() or len(results) < 50) and time.monotonic() < deadline:
-                listener.spin_once(0.05)
+            assert idle, 'the gantry never stood Idle'
+            return play_steps(BAG, wait_for_subscribers_s=20.0, step_timeout_s=60.0, **play)
         finally:
             listener.close()
             node.stop()
-    assert played == [50]
-    assert [r.info for r in results] == [''] * 50, [r.info for r in results if r.info]
-    errors = np.array([[abs(reached[i].x - sim_lights[i].x), abs(reached[i].width -
-                                                                 sim_lights[i].width)]
-                       for i in range(1, 51)]) * 1000.0  # mm
-    # The same figures from the two recordings, as a user gets them after a hardware replay.
-    result = compare(bag, tmp_path / 'hardware.mcap')
+
+
+def test_a_recorded_agent_episode_replayed_onto_the_gantry(tmp_path) -> None:
+    """``growspace-replay play --step-period`` drives the gantry through a sample oracle
+    episode: its reset first (the gantry started with another seed), then each step once the
+    previous one is answered. The reached light matches the simulator's within the tolerance,
+    step_id by step_id, from the two recordings as a user compares them."""
+    report = replay_onto_gantry(tmp_path, step_period_s=0.0)
+    assert (report.requests, report.answered, report.failures, report.stopped) == (51, 51, [],
+                                                                                  '')
+    result = compare(BAG, tmp_path / 'hardware.mcap')
     print(format_comparison(result))
-    assert result.steps >= 50 and not result.skipped, format_comparison(result)
-    assert result.errors['x'].max_abs * 1000.0 == pytest.approx(errors[:, 0].max(), abs=1e-9)
-    assert errors[:, 0].max() <= 0.05 + 1e-6  # position_tolerance_mm of the calibration
-    assert errors[:, 1].max() <= 2 * 0.05 + 1e-6  # width = 2 x lamp height above the canopy
-    assert result.within(2 * 0.05e-3 + 1e-9)
+    assert result.steps == 51 and not result.skipped and not result.unmatched, \
+        format_comparison(result)
+    assert result.errors['x'].max_abs <= 0.05e-3 + 1e-9  # position_tolerance_mm
+    assert result.errors['width'].max_abs <= 2 * 0.05e-3 + 1e-9  # 2 x lamp height
+
+
+def test_a_step_the_gantry_refuses_stops_the_replay_with_its_reason(tmp_path) -> None:
+    data = yaml.safe_load(open(default_calibration(), encoding='utf-8'))
+    data['x']['min_mm'] = -600.0  # step_id 10 of the sample episode lies beyond it
+    cal = tmp_path / 'narrow.yaml'
+    cal.write_text(yaml.safe_dump(data))
+    report = replay_onto_gantry(tmp_path, '-p', f'calibration:={cal}', step_period_s=0.0)
+    assert (report.requests, report.answered) == (11, 10)
+    assert report.stopped.startswith('episode 0, step 10/50 (step_id 10) failed on the node')
+    assert 'outside its travel [-600.0, -5.0]' in report.stopped
+    result = compare(BAG, tmp_path / 'hardware.mcap')
+    assert result.steps == 10 and result.unmatched == ['episode 0, step_id 10-50: only in A']

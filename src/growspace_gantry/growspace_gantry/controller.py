@@ -1,19 +1,19 @@
-"""One GRBL 1.1 controller behind a link: connection, streaming, moves, lamp, faults.
+"""One GRBL 1.1 controller behind a link: connection, streaming, jogs, lamp, faults.
 
-Synchronous and polled: ``poll(now)`` reads what arrived, answers it and sends what is due; the
-node calls it from a timer. The rules a machine builder expects, all here:
+Synchronous and polled: ``poll(now)`` reads what arrived, answers it, sends what is due and
+returns what went wrong (``Fault``) or was done (``Homed``) meanwhile; the node applies the
+safety rules to those (``safety.py``). What this layer guarantees:
 
 - Nothing is sent before the start-up banner; the ``$$`` settings are read at every connection
   and checked against the calibration (a contradiction is a fault: nothing moves).
-- Lines are streamed by character counting against the 128-byte receive buffer.
-- A move is a jog (``$J=``) to machine coordinates; a newer target cancels the running jog
-  (0x85) and is sent once the machine is Idle, so the lamp follows the newest command, never a
-  queue of stale ones. G-code (the lamp's ``M3``/``M5``) is only sent while Idle: GRBL refuses
-  it during a jog (error:9).
-- Lamp off is the safe state: ``safe_stop`` (hold + lamp off) for the watchdog, ``estop`` (feed
-  hold, then soft reset, which also switches the spindle output off) for a person.
-- An alarm is never unlocked here: only ``unlock`` (a person's request) sends ``$X``.
-- A lost link closes the port; reconnection retries with a growing back-off.
+- Character counting against the 128-byte receive buffer, one line in flight at a time.
+- A move is one jog to machine coordinates, cancelled the way GRBL allows (``motion.py``).
+- Every fault clears the target and the lamp power asked for: nothing moves or lights up again
+  until the node asks anew.
+- A position is believed only from a well-formed report (``grbl.parse_line``) that is
+  plausible (``position.py``); the machine has reached a target when two Idle reports agree.
+- An alarm is never unlocked here: only ``unlock`` and ``home`` (a person's requests) send
+  ``$X`` and ``$H``. A lost link closes the port; reconnection retries with a growing back-off.
 """
 
 from __future__ import annotations
@@ -21,12 +21,14 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from growspace_gantry import grbl
+from growspace_gantry import grbl, position as positions
 from growspace_gantry.calibration import Calibration
 from growspace_gantry.link import Link, LinkLost
+from growspace_gantry.motion import Motion, SETTLED_REPORTS
 
 BANNER_TIMEOUT_S = 3.0  # after a soft reset GRBL prints its banner within ~1 s
 SETTINGS_TIMEOUT_S = 3.0
+SILENCE_S = 3.0  # connected, and nothing heard for this long (status asked at >= 0.5 Hz): lost
 BACKOFF_S = (0.5, 1.0, 2.0, 5.0, 10.0)  # reconnection delays, the last one repeats
 
 OFFLINE, BOOTING, CONFIGURING, READY, FAULT = 'offline', 'booting', 'configuring', 'ready', \
@@ -39,6 +41,19 @@ class Log:
 
     warn: Callable[[str, str], object]  # (throttle key, text)
     info: Callable[[str], object]
+
+
+@dataclass(frozen=True)
+class Fault:
+    """Something stopped the machine or refused our move; the target is already cleared."""
+
+    reason: str
+    position_lost: bool = False  # the machine may not be where GRBL reports it
+
+
+@dataclass(frozen=True)
+class Homed:
+    """A person's homing cycle ($H) finished: the machine position is known again."""
 
 
 class GrblController:
@@ -61,21 +76,18 @@ class GrblController:
         self.link: Link | None = None
         self.counter = grbl.CharacterCounter()
         self.settings: dict[int, float] = {}
-        self.status: grbl.Status | None = None
-        self.position: dict[str, float] | None = None  # last reported machine position [mm]
-        self.alarm: int | None = None  # active alarm code
+        self.status: grbl.Status | None = None  # the last believed report
+        self.position: dict[str, float] | None = None  # believed machine position [mm]
+        self.alarm: int | None = None  # active alarm code (0: in Alarm without a code)
         self.fault: str | None = None  # why nothing moves (settings mismatch), until restart
-        self.failure: str | None = None  # the last refused line or lost move, for the node
+        self.failure: str | None = None  # the last failure, until the next recovery
         self.version = ''
-        self.target: dict[str, float] | None = None  # where the machine should go / be
-        self.lamp_s = 0.0  # lamp power the node wants [S]
-        self._lamp_sent: float | None = None  # last lamp power the controller accepted a line for
-        self._jog_sent = False  # the current target's jog line is on its way or running
-        self._cancel_sent = False
-        self._queue: list[str] = []  # G-code lines waiting for Idle
-        self._deadline = 0.0
-        self._next_status = 0.0
-        self._retry_at = 0.0
+        self.motion = Motion(calibration)  # the target, the lamp, the jog on the machine
+        self._events: list[Fault | Homed] = []
+        self._own_reset = False  # the next banner answers our own soft reset
+        self._filter = positions.PositionFilter()
+        self._settled = 0  # Idle reports in a row at the believed position
+        self._deadline = self._next_status = self._retry_at = self._heard = 0.0
         self._failures = 0
         self._last_wco: tuple[float, ...] | None = None
         self._now = 0.0  # time of the current poll [s]
@@ -91,72 +103,80 @@ class GrblController:
 
     @property
     def ready(self) -> bool:
-        """Connected, configured, not in alarm: moves are accepted."""
-        return self.phase == READY and self.alarm is None
+        """Connected, configured, a report read, not in alarm: moves are accepted."""
+        return self.phase == READY and self.alarm is None and self.status is not None
+
+    @property
+    def lamp_reported(self) -> float | None:
+        """The lamp power (S) the controller reports (status FS); None when unknown."""
+        if self.phase != READY or self.status is None:
+            return None
+        return self.status.speed
+
+    @property
+    def target(self) -> dict[str, float] | None:
+        """Where the machine should go [mm]; None: stay."""
+        return self.motion.target
+
+    @property
+    def lamp_s(self) -> float:
+        """The lamp power asked for [S]."""
+        return self.motion.lamp_s
+
+    @property
+    def busy(self) -> bool:
+        """A move is under way: a jog on the machine, or one about to be sent."""
+        return self.motion.busy
 
     def reached(self) -> bool:
-        """The machine is Idle at the current target, with nothing left in flight."""
-        if not self.ready or self.target is None or self.position is None:
-            return False
-        if self._jog_sent or self._queue or self.counter.pending or self.status.state != 'Idle':
-            return False
-        return all(abs(self.position[a] - v) <= self.cal.position_tolerance_mm
-                   for a, v in self.target.items())
+        """Idle at the current target (two reports agree), nothing in flight."""
+        m = self.motion
+        return (self.ready and m.target is not None and m.jog is None and m.jogged
+                and not m.queue and not self.counter.pending and self.status.state == 'Idle'
+                and self._settled >= SETTLED_REPORTS and m.at(m.target, self.position))
 
     def lamp_confirmed_off(self) -> bool:
         """Idle, and the controller accepted the lamp-off line (nothing left in flight)."""
-        return (self.ready and self._lamp_sent == 0.0 and not self._queue
-                and not self.counter.pending and self.status is not None
-                and self.status.state == 'Idle')
+        return (self.ready and self.motion.lamp_accepted == 0.0 and not self.motion.queue
+                and not self.counter.pending and self.status.state == 'Idle')
 
     # --- requests --------------------------------------------------------------------------
 
     def goto(self, target: Mapping[str, float]) -> None:
-        """Move to ``target`` (axis letter -> machine mm, already checked against the travel).
-
-        A running jog to an older target is cancelled first.
-        """
-        self.target = dict(target)
+        """Move to ``target`` (axis letter -> machine mm, checked against the travel); a jog to
+        an older target is cancelled first (once GRBL allows it)."""
+        self.motion.goto(target)
         self.failure = None
-        if self._jog_sent:
-            self._cancel_jog()
-        self._jog_sent = False
 
     def set_lamp(self, power_s: float) -> None:
         """Lamp power in S units (0 = off); sent at the next Idle, where GRBL accepts G-code."""
-        self.lamp_s = power_s
+        self.motion.lamp_s = power_s
 
     def safe_stop(self) -> None:
-        """Hold and lamp off (watchdog, shutdown): cancel the jog, then M5 once Idle."""
-        self.target = None
-        self.lamp_s = 0.0
-        if self.link is None:
-            return
-        if self._jog_sent or (self.status and self.status.state == 'Jog'):
-            self._cancel_jog()
-        elif self.status and self.status.state == 'Run':
-            self._write(grbl.FEED_HOLD)
-        self._jog_sent = False
+        """No target and lamp off: a running jog is cancelled, then ``M5`` once Idle."""
+        self.motion.stop()
 
-    def estop(self) -> None:
-        """Feed hold, then soft reset: motion stops and the spindle (lamp) output goes off.
+    def estop(self) -> bool:
+        """Feed hold, then soft reset: motion stops, the spindle (lamp) output goes off.
 
-        A reset during motion makes GRBL raise ALARM:3, which only a person clears (``unlock``).
+        Returns:
+            Whether the machine may have been moving (then its position may be lost).
         """
-        self.target = None
-        self.lamp_s = 0.0
-        self._jog_sent = False
-        if self.link is None:
-            return
-        if self._write(grbl.FEED_HOLD) and self._write(grbl.SOFT_RESET):
+        moving = self.motion.jog is not None or self.status is None \
+            or self.status.state != 'Idle'
+        self.safe_stop()
+        if self.link is not None and self._write(grbl.FEED_HOLD) \
+                and self._write(grbl.SOFT_RESET):
             self._after_reset(self._now)
+        return moving
 
     def unlock(self) -> str:
-        """A person's ``$X``: leave the alarm state (the position may be wrong: re-home)."""
+        """A person's ``$X``: leave the alarm state. Returns '' or why it was not sent."""
         if self.phase != READY:
             return f'not connected ({self.phase})'
-        if self.alarm is None and (self.status is None or self.status.state != 'Alarm'):
+        if self.alarm is None:
             return 'not in alarm: nothing to unlock'
+        self.safe_stop()
         self._send_line('$X')
         return ''
 
@@ -166,6 +186,9 @@ class GrblController:
             return f'not connected ({self.phase})'
         if self.settings.get(22) != 1.0:
             return f'homing is disabled on the controller ($22 = {self.settings.get(22)})'
+        if self.motion.jog is not None or self.counter.pending:
+            return 'the machine is busy; stop it first'
+        self.safe_stop()
         self._send_line('$H')
         return ''
 
@@ -178,37 +201,47 @@ class GrblController:
 
     # --- the poll loop ---------------------------------------------------------------------
 
-    def poll(self, now: float) -> None:
-        """Read, answer and send what is due; reconnect when it is time."""
+    def poll(self, now: float) -> list[Fault | Homed]:
+        """Read, answer and send what is due; reconnect when it is time.
+
+        Returns:
+            The faults and finished homing cycles seen during this poll.
+        """
         self._now = now
+        self._events = []
         if self.link is None:
             if self.phase != FAULT and now >= self._retry_at:
                 self._connect(now)
-            return
+            return self._events
         try:
             lines = self.link.read_lines()
         except LinkLost as e:
-            self._lost(str(e), now)
-            return
+            self._lost(str(e))
+            return self._events
         for line in lines:
-            self._handle(grbl.parse_line(line), line, now)
+            self._heard = now
+            self._handle(grbl.parse_line(line), line)
             if self.link is None:
-                return
+                return self._events
         if self.phase in (BOOTING, CONFIGURING) and now > self._deadline:
             self._lost(f'no answer from the controller within {BANNER_TIMEOUT_S:g} s '
-                       f'({"banner" if self.phase == BOOTING else "$$ settings"})', now)
-            return
-        if self.phase == READY:
-            if now >= self._next_status:
+                       f'({"banner" if self.phase == BOOTING else "$$ settings"})')
+        elif self.phase == READY and now - self._heard > SILENCE_S and '$H' not in \
+                self.counter.in_flight:  # GRBL does not answer ? while homing
+            self._lost(f'no answer from the controller for {SILENCE_S:g} s')
+        elif self.phase == READY:
+            if now >= self._next_status or self.motion.ask_status:
                 self._next_status = now + self.status_period_s
+                self.motion.ask_status = False
                 self._write(grbl.STATUS)
             self._send_due()
+        return self._events
 
     def _connect(self, now: float) -> None:
         try:
             self.link = self.open_link()
         except LinkLost as e:
-            self._schedule_retry(str(e), now)
+            self._schedule_retry(str(e))
             return
         self.log.info('gantry: link open; soft reset, waiting for the GRBL banner')
         if self._write(grbl.SOFT_RESET):  # a known state: stopped, lamp off, buffers empty
@@ -216,53 +249,71 @@ class GrblController:
 
     def _after_reset(self, now: float) -> None:
         self.counter.clear()
-        self._queue.clear()
-        self._lamp_sent = None
-        self._jog_sent = self._cancel_sent = False
-        self.status = None
+        self.motion.forget()
+        self.status = self.position = None
+        self._filter.reset()
+        self._settled = 0
+        self._own_reset = True
         self.phase = BOOTING
         self._deadline = now + BANNER_TIMEOUT_S
 
-    def _handle(self, event: grbl.Event, line: str, now: float) -> None:
+    def _handle(self, event: grbl.Event, line: str) -> None:
         if isinstance(event, grbl.Banner):
-            # After our reset or the controller's own (power glitch, reset button): whatever
-            # was in flight is gone, the spindle output is off.
+            # After our reset, or the controller's own (power glitch, reset button): whatever
+            # was in flight is gone, the spindle output is off, the position may be 0,0,0.
+            if self.phase == READY and not self._own_reset:
+                self._fail(f'the controller restarted (GRBL {event.version} banner, no reset '
+                           f'of ours): its position is lost', position_lost=True)
             self.version = event.version
-            self._after_reset(now)
+            self._after_reset(self._now)
+            self._own_reset = False
             self.settings = {}
             self.phase = CONFIGURING
-            self._deadline = now + SETTINGS_TIMEOUT_S
+            self._deadline = self._now + SETTINGS_TIMEOUT_S
             self._send_line('$$')
         elif isinstance(event, grbl.Setting):
             self.settings[event.number] = event.value
         elif isinstance(event, (grbl.Ok, grbl.Error)):
-            sent = self.counter.acknowledged()
-            if isinstance(event, grbl.Error):
-                self.failure = f'{sent!r} refused: error:{event.code} ({event.meaning})'
-                self.log.warn(f'grbl:error:{event.code}', f'gantry: {self.failure}')
-                if sent is not None and sent.startswith('$J='):
-                    self._jog_sent = False
-                    self.target = None  # never retried: the node answers the step with this
-            if self.phase == CONFIGURING and sent == '$$':
-                self._configured(now)
+            self._answer(event)
         elif isinstance(event, grbl.Status):
             self._on_status(event)
         elif isinstance(event, grbl.Alarm):
             self.alarm = event.code
-            self._jog_sent = False
-            self._queue.clear()
-            self.failure = f'ALARM:{event.code} ({event.meaning})'
-            self.log.warn('grbl:alarm', f'gantry: {self.failure}. The driver never unlocks an '
-                          f'alarm: check the machine, then call the gantry/unlock service '
-                          f'(or gantry/home).')
+            self.motion.forget()  # GRBL flushed its planner
+            text = grbl.alarm_text(event.code)
+            self._fail(text, position_lost=event.code in grbl.POSITION_LOST_ALARMS)
+            self.log.warn('grbl:alarm', f'gantry: {text}. The driver never unlocks an alarm: '
+                          f'check the machine, then call gantry/unlock (or gantry/home).')
         elif isinstance(event, grbl.Message):
             self.log.info(f'gantry: controller says: {event.text}')
-            if event.text.startswith('Caution: Unlocked'):
-                self.alarm = None
         elif isinstance(event, grbl.Unknown) and event.text:
-            self.log.warn('grbl:unknown', f'gantry: ignored an unexpected line {line!r}')
+            self.log.warn('grbl:unknown', f'gantry: ignored a line that does not follow the '
+                          f'protocol (damaged?): {line!r}')
 
-    def _configured(self, now: float) -> None:
+    def _answer(self, event: grbl.Ok | grbl.Error) -> None:
+        """An ``ok`` or ``error:N`` for the oldest line in flight."""
+        sent = self.counter.acknowledged()
+        if sent is None:
+            return  # an answer to nothing of ours (e.g. a line sent before a reset)
+        ok = isinstance(event, grbl.Ok)
+        self.motion.answered(sent, ok)
+        if not ok:
+            text = f'{sent!r} refused: error:{event.code} ({event.meaning})'
+            self.log.warn(f'grbl:error:{event.code}', f'gantry: {text}')
+            if sent in ('$X', '$H', '$$'):
+                self.failure = text  # a person's request, or the settings: nothing moved
+            else:
+                self._fail(text)  # a jog or the lamp: the move it belonged to is over
+        elif sent == '$H':
+            self.failure = None
+            self._filter.reset()  # homing sets the machine position: no plausible path to it
+            self._events.append(Homed())
+        elif sent == '$X':
+            self.failure = None
+        if self.phase == CONFIGURING and sent == '$$':
+            self._configured()
+
+    def _configured(self) -> None:
         problems = self.cal.check_settings(self.settings)
         if problems:
             self.fault = '; '.join(problems)
@@ -274,61 +325,70 @@ class GrblController:
             return
         self.phase = READY
         self._failures = 0
-        self._next_status = now
+        self.failure = None
+        self._next_status = self._heard = self._now
         self.log.info(f'gantry: GRBL {self.version} ready ({len(self.settings)} settings '
                       f'checked against the calibration)')
-        self._queue.append('M5')  # whatever the controller did before, the lamp starts off
-        self._lamp_sent = 0.0
+        self.motion.queue.append('M5')  # whatever the controller did before, the lamp is off
 
     def _on_status(self, status: grbl.Status) -> None:
-        self.status = status
         if status.wco is not None:
             self._last_wco = status.wco
-        position = status.machine_position(self._last_wco)
-        if position is not None:
-            self.position = dict(zip(grbl.AXES, position))
+        reported = status.machine_position(self._last_wco)
+        if reported is not None:
+            place = dict(zip(grbl.AXES, reported))
+            verdict = self._filter.offer(place, self._now, self._max_rate())
+            if verdict == positions.REJECTED:
+                self.log.warn('grbl:implausible', f'gantry: ignored a status report whose '
+                              f'position is implausible (damaged?): {place} after '
+                              f'{self.position}')
+                return
+            if verdict == positions.REANCHORED:
+                self.log.warn('grbl:reanchored', f'gantry: the machine was moved to {place} '
+                              f'by something else (three reports agree)')
+            same = self.position == place
+            self.position = place
+        else:
+            same = False
+        self.status = status
+        self._settled = (self._settled + 1 if same else 1) if status.state == 'Idle' else 0
         if status.state == 'Alarm' and self.alarm is None:
             self.alarm = 0  # in alarm without a code (e.g. after power-up with homing enabled)
-            self.failure = 'the controller is in the Alarm state'
-            self.log.warn('grbl:alarm', 'gantry: the controller is in the Alarm state; the '
-                          'driver never unlocks it: check the machine, then call gantry/unlock '
-                          '(or gantry/home).')
+            self.motion.forget()
+            self._fail(grbl.alarm_text(None), position_lost=True)
+            self.log.warn('grbl:alarm', f'gantry: {grbl.alarm_text(None)}; the driver never '
+                          f'unlocks it: check the machine, then call gantry/unlock (or '
+                          f'gantry/home).')
         elif status.state != 'Alarm' and self.alarm is not None:
-            self.alarm = None
-        if status.state == 'Idle':
-            self._cancel_sent = False
-            if self._jog_sent and not self.counter.pending:
-                self._jog_sent = False  # the jog is over (reached, or cut short by a cancel)
+            self.alarm = None  # left by $X or $H
+        problem = self.motion.reported(status.state, self.position, self._settled)
+        if problem:
+            self._fail(problem)
 
     def _send_due(self) -> None:
-        """Send queued G-code and the current target's jog when the machine allows it."""
-        if self.alarm is not None or self.status is None or self._cancel_sent:
+        """Write what the motion asks for (a jog cancel, a lamp line, the next jog)."""
+        if self.alarm is not None or self.status is None:
             return
-        idle = self.status.state == 'Idle' and not self._jog_sent
-        if idle and self._lamp_sent != self.lamp_s:
-            self._queue.append(grbl.lamp_line(self.lamp_s))
-            self._lamp_sent = self.lamp_s
-        while self._queue and idle and self.counter.fits(self._queue[0]):
-            self._send_line(self._queue.pop(0))
-        if self.target is not None and not self._jog_sent and not self._queue \
-                and self.status.state in ('Idle', 'Jog') and not self._at_target():
-            line = grbl.jog_line(self.target, self.cal.feed_mm_min)
-            if self.counter.fits(line):
-                self._send_line(line)
-                self._jog_sent = True
+        due = self.motion.due(self.status.state, self.position, self._settled,
+                              self.counter.pending)
+        if isinstance(due, bytes):
+            self._write(due)
+        elif due is not None:
+            self._send_line(due)
 
-    def _at_target(self) -> bool:
-        return self.position is not None and all(
-            abs(self.position[a] - v) <= self.cal.position_tolerance_mm
-            for a, v in self.target.items())
+    def _max_rate(self) -> float:
+        """The fastest the machine can move [mm/min]: its max rates and homing seek rate."""
+        rates = [self.settings.get(n, 0.0) for n in (110, 111, 112, 25)]
+        return max(rates + [self.cal.feed_mm_min])
 
-    def _cancel_jog(self) -> None:
-        if not self._cancel_sent and self.link is not None:
-            self._write(grbl.JOG_CANCEL)
-            self._cancel_sent = True
+    def _fail(self, reason: str, position_lost: bool = False) -> None:
+        """A fault: the target and the lamp power asked for are cleared."""
+        self.safe_stop()
+        self.failure = reason
+        self._events.append(Fault(reason, position_lost))
 
     def _send_line(self, line: str) -> None:
-        if self._write(line.encode('ascii') + b'\n'):
+        if self.counter.fits(line) and self._write(line.encode('ascii') + b'\n'):
             self.counter.sent(line)
 
     def _write(self, data: bytes) -> bool:
@@ -338,25 +398,27 @@ class GrblController:
         try:
             self.link.write(data)
         except LinkLost as e:
-            self._lost(str(e), self._now)
+            self._lost(str(e))
             return False
         return True
 
-    def _lost(self, reason: str, now: float) -> None:
+    def _lost(self, reason: str) -> None:
         if self.link is not None:
             self.link.close()
         self.link = None
         self.phase = OFFLINE
-        self.status = None
-        self.position = None
-        self._jog_sent = False
-        self.failure = f'link lost: {reason}'
-        self._schedule_retry(reason, now)
+        self.status = self.position = None
+        self._filter.reset()
+        self.motion.forget()
+        self.counter.clear()
+        self._fail(f'link lost: {reason}', position_lost=True)
+        self._schedule_retry(reason)
 
-    def _schedule_retry(self, reason: str, now: float) -> None:
+    def _schedule_retry(self, reason: str) -> None:
         delay = BACKOFF_S[min(self._failures, len(BACKOFF_S) - 1)]
         self._failures += 1
-        self._retry_at = now + delay
+        self._retry_at = self._now + delay
         self.log.warn('link', f'gantry: link down ({reason}); the lamp state is unknown until '
                       f'the controller answers again (a reconnection resets it, lamp off); '
                       f'retrying in {delay:g} s')
+

@@ -186,53 +186,85 @@ class Unknown:
 Event = Ok | Error | Alarm | Banner | Status | Message | Feedback | Setting | StartupLine | Unknown
 
 _BANNER = re.compile(r"^Grbl\s+(\S+)\s+\['\$' for help\]$")
-_SETTING = re.compile(r'^\$(\d+)=(-?[0-9.]+)')
+_SETTING = re.compile(r'\$(\d{1,3})=(-?\d+(?:\.\d+)?)')
+_CODE = re.compile(r'\d{1,3}')
+_NUMBER = r'-?\d+(?:\.\d+)?'  # a rate or speed: sign, digits, maybe decimals
+_COORD = r'-?\d+\.\d{3,4}'  # a coordinate: always 3 decimals in mm, 4 in inches ($13=1)
+_AXES = re.compile(rf'{_COORD}(?:,{_COORD}){{2,5}}')  # 3 to 6 axes (grblHAL has up to 6)
+_PAIR = re.compile(rf'({_NUMBER}),({_NUMBER})')
+_FIELD_NAME = re.compile(r'[A-Z][A-Za-z]*')
+SUBSTATES = {'Hold': '01', 'Door': '0123'}  # the states that carry a substate, and its values
+# Alarms after which GRBL says the machine position is likely lost (re-homing recommended).
+POSITION_LOST_ALARMS = frozenset({1, 3, 6, 7, 8, 9})
 
 
-def _numbers(text: str) -> tuple[float, ...]:
-    return tuple(float(v) for v in text.split(','))
+def _axes(fields: Mapping[str, str], name: str) -> tuple[float, ...] | None:
+    if name not in fields:
+        return None
+    if not _AXES.fullmatch(fields[name]):
+        raise ValueError(f'{name}:{fields[name]!r} is not 3 to 6 coordinates')
+    return tuple(float(v) for v in fields[name].split(','))
 
 
 def parse_status(body: str) -> Status:
-    """Parse the inside of ``<...>``.
+    """Parse the inside of ``<...>``: every field that is used is checked for count and form.
 
     Raises:
-        ValueError: the state or a number cannot be read.
+        ValueError: an unknown state or substate, a field without a name or given twice, not
+            exactly one of MPos and WPos, a position or offset that is not 3 to 6 numbers (WCO:
+            as many as the position), an FS that is not two numbers, an F or Bf out of form.
     """
     parts = body.split('|')
-    state, _, sub = parts[0].partition(':')
+    state, has_sub, sub = parts[0].partition(':')
     if state not in STATES:
         raise ValueError(f'unknown machine state {parts[0]!r}')
-    fields = dict(p.partition(':')[::2] for p in parts[1:])
+    if has_sub and not (len(sub) == 1 and sub in SUBSTATES.get(state, '')):
+        raise ValueError(f'unknown substate {parts[0]!r}')
+    fields: dict[str, str] = {}
+    for part in parts[1:]:
+        name, colon, value = part.partition(':')
+        if not colon or not _FIELD_NAME.fullmatch(name) or name in fields:
+            raise ValueError(f'malformed field {part!r}')
+        fields[name] = value
+    mpos, wpos, wco = _axes(fields, 'MPos'), _axes(fields, 'WPos'), _axes(fields, 'WCO')
+    if (mpos is None) == (wpos is None):
+        raise ValueError('a report carries exactly one of MPos and WPos')
+    if wco is not None and len(wco) != len(mpos or wpos):
+        raise ValueError('WCO and the position have different numbers of axes')
     feed = speed = None
     if 'FS' in fields:
-        feed, speed = _numbers(fields['FS'])[:2]
+        match = _PAIR.fullmatch(fields['FS'])
+        if not match:
+            raise ValueError(f'FS:{fields["FS"]!r} is not two numbers')
+        feed, speed = float(match.group(1)), float(match.group(2))
     elif 'F' in fields:
-        feed = _numbers(fields['F'])[0]
+        if not re.fullmatch(_NUMBER, fields['F']):
+            raise ValueError(f'F:{fields["F"]!r} is not a number')
+        feed = float(fields['F'])
     planner_free = rx_free = None
     if 'Bf' in fields:
-        planner_free, rx_free = (int(v) for v in _numbers(fields['Bf'])[:2])
-    get = fields.get
-    return Status(state=state, substate=int(sub) if sub else None,
-                  mpos=_numbers(get('MPos')) if 'MPos' in fields else None,
-                  wpos=_numbers(get('WPos')) if 'WPos' in fields else None,
-                  wco=_numbers(get('WCO')) if 'WCO' in fields else None,
-                  feed=feed, speed=speed, planner_free=planner_free, rx_free=rx_free,
+        match = re.fullmatch(r'(\d+),(\d+)', fields['Bf'])
+        if not match:
+            raise ValueError(f'Bf:{fields["Bf"]!r} is not two counts')
+        planner_free, rx_free = int(match.group(1)), int(match.group(2))
+    return Status(state=state, substate=int(sub) if has_sub else None, mpos=mpos, wpos=wpos,
+                  wco=wco, feed=feed, speed=speed, planner_free=planner_free, rx_free=rx_free,
                   fields=fields)
 
 
 def parse_line(line: str) -> Event:
     """Turn one line received from GRBL (without its line ending) into an event.
 
-    Never raises: a line that does not follow the protocol becomes ``Unknown``.
+    Never raises: a line that does not follow the protocol in every part it uses (a damaged
+    line: GRBL's output has no checksum) becomes ``Unknown``.
     """
     text = line.strip()
     try:
         if text == 'ok':
             return Ok()
-        if text.startswith('error:'):
+        if text.startswith('error:') and _CODE.fullmatch(text[6:]):
             return Error(int(text[6:]))
-        if text.startswith('ALARM:'):
+        if text.startswith('ALARM:') and _CODE.fullmatch(text[6:]):
             return Alarm(int(text[6:]))
         if text.startswith('<') and text.endswith('>'):
             return parse_status(text[1:-1])
@@ -244,12 +276,22 @@ def parse_line(line: str) -> Event:
         match = _BANNER.match(text)
         if match:
             return Banner(match.group(1))
-        match = _SETTING.match(text)
+        match = _SETTING.fullmatch(text)
         if match:
             return Setting(int(match.group(1)), float(match.group(2)))
     except ValueError:
         pass
     return Unknown(text)
+
+
+def alarm_text(code: int | None) -> str:
+    """How an alarm is reported: ``ALARM:3 (reset while in motion; ...)``, or ``alarm (no
+    code)`` for a controller found in the Alarm state without an ``ALARM:N`` line (power-up
+    with homing enabled)."""
+    if not code:
+        return 'alarm (no code): the controller is in the Alarm state (with homing enabled it ' \
+            'starts so at power-up)'
+    return f'ALARM:{code} ({ALARMS.get(code, "unknown alarm code")})'
 
 
 def _number(value: float) -> str:
@@ -333,6 +375,11 @@ class CharacterCounter:
     def pending(self) -> int:
         """Lines sent and not yet answered."""
         return len(self._in_flight)
+
+    @property
+    def in_flight(self) -> tuple[str, ...]:
+        """The lines sent and not yet answered, oldest first."""
+        return tuple(self._in_flight)
 
     def clear(self) -> None:
         """A soft reset or a lost link empties the controller's buffer: forget what was in it."""

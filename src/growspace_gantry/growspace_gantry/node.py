@@ -20,9 +20,10 @@ chamber namespace:
 The light model is a ``Simulation`` that is never stepped: its light moves by ``core.light``
 (clamped inside the chamber exactly as in the simulator) and a reset places it with the task's
 own layout, so an agent's action, a bag's command and a teleop key mean the same light on both.
-Safety rules live here and in ``GrblController``: a command that cannot be reached is refused
-before anything is sent; no command for ``watchdog_s`` turns the lamp off and holds; every
-fault (alarm, lost link, estop) leaves the lamp off; nothing ever unlocks an alarm by itself.
+A relative action starts from the light the machine reports (never from a target it may not
+have reached), and a command that is refused changes nothing. The safety rules (which command
+may move the machine, what every fault does, the watchdog, the e-stop latch) are ``safety.py``;
+a command that cannot be reached is refused before anything is sent.
 """
 
 from __future__ import annotations
@@ -37,8 +38,10 @@ from typing import Any
 import numpy as np
 
 from growspace_gantry.calibration import Calibration, TargetError
-from growspace_gantry.controller import GrblController
+from growspace_gantry.controller import GrblController, Log
+from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
+from growspace_gantry.status import diagnostics, DIAGNOSTICS
 from growspace_sim import __version__
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
@@ -51,7 +54,6 @@ from growspace_sim.ros.interface import (
     COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, Topic)
 from growspace_sim.simulation import Simulation
 
-DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
 EMPTY = 'std_msgs/msg/Empty'
 TRIGGER = 'std_srvs/srv/Trigger'
 POLL_S = 0.01  # how often the controller's link is read [s]
@@ -100,9 +102,8 @@ class GantryNode:
         self.steps = 0  # commands stepped in this episode
         self.seed: int | None = None
         self.pending: tuple[int, int, float] | None = None  # (reset_id, step_id, deadline)
-        self.last_command = clock()
-        self.lamp_on = False
-        self._watchdog_tripped = False
+        self.safety = Safety(controller, Log(self.log.warn, self.log.info), self._fail_pending,
+                             params.watchdog_s, clock())
         self._next_status = 0.0
         self._status_key: tuple = ()
         self._channels: dict[str, int] = {}
@@ -115,9 +116,10 @@ class GantryNode:
         transport.serve(TRIGGER, 'gantry/estop', lambda req: self._trigger(
             self.estop('gantry/estop service')))
         transport.serve(TRIGGER, 'gantry/unlock', lambda req: self._trigger(
-            self.controller.unlock(), 'unlock ($X) sent; re-home if the position is in doubt'))
+            self.safety.unlock(), 'unlocked (e-stop latch released, $X sent in alarm); nothing '
+            'moves until a new command; re-home if the position is in doubt'))
         transport.serve(TRIGGER, 'gantry/home', lambda req: self._trigger(
-            self.controller.home(), 'homing ($H) sent'))
+            self.safety.home(), 'homing ($H) sent'))
         transport.create_timer(POLL_S, self.poll)
         seed = params.seed if params.seed >= 0 else secrets.randbits(63)
         self._start_recording(seed)
@@ -130,8 +132,6 @@ class GantryNode:
 
     def on_command(self, msg: Any, cdr: bytes) -> None:
         """A LightCommand: move the model light by the simulator's rules, then the machine."""
-        self.last_command = self.clock()
-        self._watchdog_tripped = False
         step_id = int(msg.step_id)
         lockstep = self.params.mode == 'lockstep'
         if lockstep:
@@ -143,27 +143,38 @@ class GantryNode:
             if self.steps >= self.cfg.episode_length:
                 self._result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
                 return
-        before = self.sim.chamber.light.copy()
+        relative = int(msg.mode) in (convert.MODE_DISCRETE, convert.MODE_CONTINUOUS)
+        reason = self.safety.refusal(relative)
+        if reason:
+            self._refused('command:refused', f'light/command: not sent: {reason}',
+                          step_id if lockstep else None, f'error: gantry not ready: {reason}')
+            return
+        light = self.sim.chamber.light
+        before = light.copy()
         try:
+            if relative:  # from the light the machine reached, never from a target
+                reached = self.cal.to_light(self.controller.position, light)
+                self.sim.place_light(x=reached.x, z=reached.z, width=reached.width,
+                                     radius=reached.radius)
             convert.apply_command(self.sim, msg)
             target = self.cal.to_machine(self.sim.chamber.light)
         except (CommandError, TargetError) as e:
-            # Nothing is sent: the model light goes back to where the machine is going.
+            # Nothing is sent and the model light stays as it was.
             self.sim.place_light(x=before.x, z=before.z, width=before.width,
                                  radius=before.radius)
-            self.log.warn(f'command:{getattr(e, "field", "travel")}',
-                          f'light/command: not sent to the machine: {e}')
-            if lockstep:
-                self._result(step_id, self.reset_id, info=f'error: {e}')
+            self._refused(f'command:{getattr(e, "field", "travel")}',
+                          f'light/command: not sent to the machine: {e}',
+                          step_id if lockstep else None, f'error: {e}')
             return
-        self._move(target, step_id if lockstep else None)
+        self._move(target, step_id if lockstep else None, placing=not relative)
 
     def on_reset(self, msg: Any, cdr: bytes) -> None:
         """A ResetRequest: place the light as the simulator would, then move there."""
-        self.last_command = self.clock()
-        self._watchdog_tripped = False
         reset_id = int(msg.reset_id)
+        reason = self.safety.refusal(relative=False)
         try:
+            if reason:
+                raise ValueError(f'gantry not ready: {reason}')
             seed, challenge, setting = convert.reset_args(msg)
             changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
             cfg = self.cfg.replace(**changes) if changes else self.cfg
@@ -177,79 +188,79 @@ class GantryNode:
         self.sim, self.cfg, self.seed = sim, cfg, sim.seed
         self.reset_id, self.last_step_id, self.steps = reset_id, 0, 0
         self._publish('config', types.new(types.STRING, data=self._config_payload(seed)))
-        self._move(target, 0)
+        self._move(target, 0, placing=True)
 
     def estop(self, source: str) -> str:
-        """Feed hold, lamp off, soft reset. Returns '' (the Trigger succeeds)."""
-        self.log.warn('estop', f'gantry: EMERGENCY STOP from {source}: feed hold, lamp off, '
-                      f'soft reset; a move in progress leaves the machine in alarm (unlock by '
-                      f'hand).')
-        self.controller.estop()
-        self.lamp_on = False
-        self._fail_pending('emergency stop')
+        """Feed hold, lamp off, soft reset, latched until gantry/unlock. Returns '' (done)."""
+        self.safety.estop(source)
         return ''
 
     # --- the loop --------------------------------------------------------------------------
 
     def poll(self) -> None:
-        """Timer callback: run the controller, answer finished moves, watch the watchdog."""
-        now = self.clock()
-        self.controller.poll(now)
+        """Timer callback: run the controller, apply the safety rules, answer finished moves.
+
+        Never raises: an unexpected error is an e-stop (the machine in an unknown state is
+        stopped and latched until a person looks).
+        """
+        try:
+            self._poll(self.clock())
+        except Exception as e:  # noqa: BLE001 - a timer callback must leave the machine safe
+            self.log.warn('internal', f'gantry: internal error in the poll loop: '
+                          f'{type(e).__name__}: {e}')
+            if not self.safety.estop_latched:
+                try:
+                    self.safety.estop(f'an internal error ({type(e).__name__})')
+                except Exception:  # noqa: BLE001 - nothing more can be done here
+                    pass
+
+    def _poll(self, now: float) -> None:
         c = self.controller
+        self.safety.tick(now, c.poll(now))
         if self.pending is not None:
             reset_id, step_id, deadline = self.pending
             if c.reached():
                 self.pending = None
-                self.last_command = now  # the watchdog counts from the answer
                 if step_id:
                     self.steps += 1
                 self._answer(reset_id, step_id)
-            elif c.failure or not c.ready:
+            elif c.phase != 'ready':
                 self._fail_pending(c.failure or f'the controller is {c.state}')
             elif now > deadline:
-                c.safe_stop()
-                self.lamp_on = False
-                self._fail_pending(f'the move did not finish within move_timeout_s = '
-                                   f'{self.params.move_timeout_s:g} s; holding, lamp off')
-        watchdog = self.params.watchdog_s
-        # A lockstep move in progress is bounded by move_timeout_s, not by the watchdog.
-        if watchdog and self.lamp_on and not self._watchdog_tripped and self.pending is None \
-                and now - self.last_command > watchdog:
-            self._watchdog_tripped = True
-            self.lamp_on = False
-            c.safe_stop()
-            self._fail_pending('watchdog')
-            self.log.warn('watchdog', f'gantry: no command for {watchdog:g} s (watchdog_s): '
-                          f'lamp off, holding; the next command turns it on again.')
+                self.safety.fault(f'the move did not finish within move_timeout_s = '
+                                  f'{self.params.move_timeout_s:g} s; holding, lamp off')
+        flush = getattr(self.log, 'flush', None)
+        if flush is not None:
+            flush()  # how many warnings the throttle kept back, once their period is over
         realtime_due = self.params.mode == 'realtime' and now >= self._next_status
-        key = (c.state, c.alarm, c.phase, c.fault)
+        key = (c.state, c.alarm, c.phase, c.fault, self.safety.estop_latched,
+               self.safety.position_known)
         if key != self._status_key or now >= self._next_status:
             self._status_key = key
             self._next_status = now + (1.0 / self.params.status_hz if
                                        self.params.mode == 'realtime' else STATUS_PERIOD_S)
-            self._publish('status', self._diagnostics())
+            self._publish('status', diagnostics(self))
             if realtime_due and c.position is not None:
                 self._publish('light', self._reached_light(0, self.transport.now_ns()))
 
-    def _move(self, target: dict[str, float], step_id: int | None) -> None:
-        c = self.controller
-        if not c.ready:
-            reason = c.fault or c.failure or f'the controller is {c.state}'
-            self.log.warn('command:controller', f'light/command: not sent: {reason}')
-            if step_id is not None:
-                self._result(step_id, self.reset_id, info=f'error: gantry not ready: {reason}')
-            return
+    def _move(self, target: dict[str, float], step_id: int | None, placing: bool) -> None:
         if self.pending is not None:
             self._fail_pending(f'superseded by a newer command (step_id {step_id})')
         if self.cal.size is None and not self._size_warned:
             self._size_warned = True
             self.log.warn('size', f'gantry: the calibration has no size axis: the lamp lights a '
                           f'fixed {self.cal.fixed_size_m:g} m whatever width or radius is asked.')
-        c.goto(target)
-        c.set_lamp(self.params.lamp_power * self.cal.lamp_max_s)
-        self.lamp_on = self.params.lamp_power > 0
+        self.controller.goto(target)
+        self.controller.set_lamp(self.params.lamp_power * self.cal.lamp_max_s)
+        self.safety.accepted(self.clock(), placing)
         if step_id is not None:
             self.pending = (self.reset_id, step_id, self.clock() + self.params.move_timeout_s)
+
+    def _refused(self, key: str, text: str, step_id: int | None, info: str) -> None:
+        """A command that is not sent: logged (throttled), answered in lockstep."""
+        self.log.warn(key, text)
+        if step_id is not None:
+            self._result(step_id, self.reset_id, info=info)
 
     def _fail_pending(self, reason: str) -> None:
         if self.pending is None:
@@ -279,39 +290,6 @@ class GantryNode:
             outcome, step_id=step_id, reset_id=reset_id, step=self.steps,
             stamp_ns=self.transport.now_ns() if stamp is None else stamp,
             frame_id=self.params.frame_id, info=info))
-
-    def _diagnostics(self) -> Any:
-        c = self.controller
-        level = 2 if (c.alarm is not None or c.fault or c.phase == 'offline') else \
-            0 if c.ready else 1
-        if c.fault:
-            message = f'fault: {c.fault}'
-        elif c.alarm is not None:
-            message = f'ALARM:{c.alarm}' + (f' {c.failure}' if c.failure else '')
-        else:
-            message = c.state
-        pos = c.position or {}
-        values = {
-            'state': c.state, 'link': 'connected' if c.link is not None else 'offline',
-            'grbl_version': c.version, 'alarm': '' if c.alarm is None else str(c.alarm),
-            'mpos_x_mm': f'{pos.get("X", float("nan")):.3f}',
-            'mpos_y_mm': f'{pos.get("Y", float("nan")):.3f}',
-            'mpos_z_mm': f'{pos.get("Z", float("nan")):.3f}',
-            'rx_buffer_used_bytes': str(c.counter.used), 'lines_in_flight': str(
-                c.counter.pending),
-            'planner_free_blocks': '' if c.status is None or c.status.planner_free is None
-            else str(c.status.planner_free),
-            'lamp_s': f'{c.lamp_s:g}', 'watchdog_tripped': str(self._watchdog_tripped).lower(),
-            'last_failure': c.failure or '',
-        }
-        kv = [types.new('diagnostic_msgs/msg/KeyValue', key=k, value=v)
-              for k, v in values.items()]
-        status = types.new('diagnostic_msgs/msg/DiagnosticStatus', level=level,
-                           name=f'{self.transport.resolve("~")}: GRBL controller',
-                           message=message, hardware_id=self.params.port, values=kv)
-        return types.new(DIAGNOSTICS, header=convert.header(self.transport.now_ns(),
-                                                            self.params.frame_id),
-                         status=[status])
 
     def _config_payload(self, seed: int | None) -> str:
         p = self.params

@@ -43,6 +43,8 @@ class ThrottledLogger:
         self._clock = clock
         self._last: dict[str, float] = {}
         self._suppressed: dict[str, int] = {}
+        self._held: dict[str, str] = {}  # the last suppressed text of each key
+        self.suppressed = 0  # warnings held back so far, all keys
 
     def warn(self, key: str, text: str) -> bool:
         """Log a warning unless one with this key was logged less than a period ago.
@@ -54,15 +56,32 @@ class ThrottledLogger:
         last = self._last.get(key)
         if last is not None and now - last < self.period_s:
             self._suppressed[key] = self._suppressed.get(key, 0) + 1
+            self._held[key] = text
+            self.suppressed += 1
             return False
         self._last[key] = now
         skipped = self._suppressed.pop(key, 0)
+        self._held.pop(key, None)
         suffix = f' ({skipped} similar warnings suppressed)' if skipped else ''
         try:
             self._warn_sink(text + suffix)
         except Exception:  # noqa: BLE001 - a broken log sink must not stop the node
             pass
         return True
+
+    def flush(self) -> None:
+        """Say how many warnings each key held back once its period is over, without waiting
+        for another warning of that key (which may never come)."""
+        if not self._suppressed:
+            return
+        now = self._clock()
+        for key in [k for k in self._suppressed if now - self._last[k] >= self.period_s]:
+            count, text = self._suppressed.pop(key), self._held.pop(key)
+            try:
+                self._warn_sink(f'{count} similar warnings suppressed in the last '
+                                f'{now - self._last[key]:.0f} s; the last one: {text}')
+            except Exception:  # noqa: BLE001 - a broken log sink must not stop the node
+                pass
 
     def info(self, text: str) -> None:
         try:

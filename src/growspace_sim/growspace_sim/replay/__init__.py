@@ -8,9 +8,11 @@
   checked (exit 1);
 - ``export BAG OUT.gif|OUT.mp4``: one episode's camera images, with a progress bar;
 - ``play BAG``: republish the messages on their topics over rclpy, with the recorded timing or
-  as fast as possible (``ros2 bag play`` where rosbag2 is not installed);
-- ``compare A B``: the applied light of B against A step by step, max and RMS per field (a
-  simulated run and the same commands replayed onto the LED gantry);
+  as fast as possible (``ros2 bag play`` where rosbag2 is not installed); with
+  ``--step-period``, step by step onto a lockstep node such as the LED gantry: each episode's
+  reset first, each command once the previous step was answered;
+- ``compare A B``: the applied light of B against A, matched by episode and step_id, max and
+  RMS per field (a simulated run and the same commands replayed onto the LED gantry);
 - ``recover BAG OUT``: copy every readable chunk of a file cut short by a crash or damaged,
   and say what was skipped.
 
@@ -31,10 +33,10 @@ from growspace_sim.replay.compare import compare, Comparison, format_comparison
 from growspace_sim.replay.episodes import (
     Episode, StepRecord, format_summary, read_episodes, summary)
 from growspace_sim.replay.export import export_episode
-from growspace_sim.replay.play import play
+from growspace_sim.replay.play import play, play_steps, StepReplay
 from growspace_sim.replay.resim import COMPARED, Mismatch, ResimReport, resimulate
 
 __all__ = ['Bag', 'BagMessage', 'COMPARED', 'Comparison', 'Episode', 'Mismatch', 'ReplayError',
-           'ResimReport', 'StepRecord', 'TopicInfo', 'compare', 'export_episode',
-           'format_comparison', 'format_summary', 'main', 'play', 'read_episodes', 'resimulate',
-           'summary']
+           'ResimReport', 'StepRecord', 'StepReplay', 'TopicInfo', 'compare', 'export_episode',
+           'format_comparison', 'format_summary', 'main', 'play', 'play_steps', 'read_episodes',
+           'resimulate', 'summary']

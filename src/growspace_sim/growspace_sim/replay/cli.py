@@ -13,12 +13,12 @@ from growspace_sim.replay.bag import ReplayError
 from growspace_sim.replay.compare import compare, format_comparison
 from growspace_sim.replay.episodes import format_summary, summary
 from growspace_sim.replay.export import export_episode
-from growspace_sim.replay.play import play
+from growspace_sim.replay.play import play, play_steps
 from growspace_sim.replay.resim import resimulate
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``growspace-replay`` entry point; returns the exit status (0 ok, 1 mismatch, 2 error)."""
+def build_parser() -> argparse.ArgumentParser:
+    """The ``growspace-replay`` command line (the tests parse the README's lines with it)."""
     parser = argparse.ArgumentParser(prog='growspace-replay', description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
     p_info = sub.add_parser('info', help='episodes, returns, steps and duration')
@@ -42,19 +42,34 @@ def main(argv: list[str] | None = None) -> int:
     p_export.add_argument('--scale', type=int, default=4)
     p_export.add_argument('--namespace')
     p_export.add_argument('--overwrite', action='store_true')
-    p_play = sub.add_parser('play', help='republish on the topics over ROS 2')
+    p_play = sub.add_parser('play', help='republish on the topics over ROS 2; with '
+                            '--step-period, step by step onto a lockstep node (the gantry)')
     p_play.add_argument('bag')
     speed = p_play.add_mutually_exclusive_group()
     speed.add_argument('--rate', type=float, default=1.0, help='speed factor (1 = original)')
     speed.add_argument('--fast', action='store_true', help='as fast as possible')
     speed.add_argument('--step-period', type=float, metavar='SECONDS',
-                       help='one recorded step (command or reset) per SECONDS of wall time, '
-                            'e.g. 3600 for a real plant on the LED gantry')
+                       help="step by step onto a lockstep node: each episode's reset, then "
+                            'each command once the previous step_result came, at least SECONDS '
+                            'apart (0: as fast as the node answers; 3600: a real plant on the '
+                            'LED gantry)')
     p_play.add_argument('--topics', '--only', nargs='+',
-                        help='recorded topic names to publish, e.g. /growspace/light/command')
+                        help='recorded topic names to publish, e.g. /growspace/light/command '
+                             '(not with --step-period: it sends resets and commands)')
     p_play.add_argument('--domain-id', type=int, help='default: ROS_DOMAIN_ID')
-    p_play.add_argument('--wait', type=float, default=1.0,
-                        help='seconds to wait for subscribers first')
+    p_play.add_argument('--wait', type=float, help='seconds to wait for subscribers first '
+                        '(default 1; 10 with --step-period)')
+    steps = p_play.add_argument_group('step by step (--step-period)')
+    steps.add_argument('--episode', type=int, help='only this episode (0-based, -1 = last)')
+    steps.add_argument('--start-step', type=int, default=1, metavar='STEP_ID',
+                       help='the first step_id to play; the light is placed where the '
+                            'recording had it before')
+    steps.add_argument('--stop-step', type=int, metavar='STEP_ID', help='the last step_id')
+    steps.add_argument('--keep-going', action='store_true',
+                       help='go on after a step that fails on the node (default: stop)')
+    steps.add_argument('--step-timeout', type=float, default=600.0, metavar='SECONDS',
+                       help='give up when a step has no step_result for this long')
+    steps.add_argument('--namespace', help='the chamber namespace in the recording')
     p_compare = sub.add_parser('compare', help='applied light of B against A, step by step '
                                                '(e.g. a simulated run and its gantry replay)')
     p_compare.add_argument('a', help='the reference recording')
@@ -66,6 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')
     p_recover.add_argument('bag')
     p_recover.add_argument('out')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``growspace-replay`` entry point; returns the exit status (0 ok, 1 mismatch or a failed
+    step, 2 error)."""
+    parser = build_parser()
     args = parser.parse_args(argv)
 
     def warn(line: str) -> None:
@@ -112,12 +134,7 @@ def main(argv: list[str] | None = None) -> int:
                                overwrite=args.overwrite, warn=warn)
             print(f'wrote {n} frames to {args.out}')
         elif args.command == 'play':
-            with recording.stop_on_signals():
-                n = play(args.bag, rate=None if args.fast else args.rate, topics=args.topics,
-                         domain_id=args.domain_id, wait_for_subscribers_s=args.wait,
-                         log=lambda line: print(line, file=sys.stderr),
-                         step_period_s=args.step_period)
-            print(f'published {n} messages')
+            return _play(parser, args)
         elif args.command == 'compare':
             result = compare(args.a, args.b, namespace_a=args.namespace_a,
                              namespace_b=args.namespace_b)
@@ -147,6 +164,39 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
     return 0
+
+
+def _play(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+    stepwise = args.step_period is not None
+    step_options = [name for name, value in (
+        ('--episode', args.episode is not None), ('--start-step', args.start_step != 1),
+        ('--stop-step', args.stop_step is not None), ('--keep-going', args.keep_going),
+        ('--namespace', args.namespace is not None)) if value]
+    if not stepwise and step_options:
+        parser.error(f'{", ".join(step_options)} need(s) --step-period (step by step)')
+    if stepwise and args.topics:
+        parser.error('--only does not go with --step-period: a step by step replay sends '
+                     "each episode's reset and commands")
+    with recording.stop_on_signals():
+        if not stepwise:
+            n = play(args.bag, rate=None if args.fast else args.rate, topics=args.topics,
+                     domain_id=args.domain_id, log=say,
+                     wait_for_subscribers_s=1.0 if args.wait is None else args.wait)
+            print(f'published {n} messages')
+            return 0
+        report = play_steps(args.bag, episode=args.episode, start_step=args.start_step,
+                            stop_step=args.stop_step, step_period_s=args.step_period,
+                            keep_going=args.keep_going, step_timeout_s=args.step_timeout,
+                            namespace=args.namespace, domain_id=args.domain_id, log=say,
+                            wait_for_subscribers_s=10.0 if args.wait is None else args.wait)
+    print(f'{report.requests} request(s) sent, {report.answered} answered, '
+          f'{len(report.failures)} failed' + (f'; STOPPED: {report.stopped}'
+                                              if report.stopped else ''))
+    for failure in report.failures:
+        print(f'  failed: {failure}')
+    return 1 if report.failures or report.stopped else 0
 
 
 if __name__ == '__main__':

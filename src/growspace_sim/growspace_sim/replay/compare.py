@@ -1,5 +1,9 @@
 """Compare the applied light of two recordings step by step: a simulated run and the same
-commands replayed onto the LED gantry (or any two runs of the same commands)."""
+commands replayed onto the LED gantry (or any two runs of the same commands).
+
+Steps are matched by (episode, step_id), never by their order or count: a step the gantry
+refused has no light in its recording, and every later step must still meet its own step_id.
+"""
 
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ class FieldError:
     max_abs: float = 0.0
     sum_sq: float = 0.0
     count: int = 0
-    worst: str = ''  # 'episode E, step S' of the largest difference
+    worst: str = ''  # 'episode E, step_id S' of the largest difference
 
     @property
     def rms(self) -> float:
@@ -37,7 +41,7 @@ class FieldError:
 
 @dataclasses.dataclass
 class Comparison:
-    """Light of recording B against recording A, matched by episode order and step number."""
+    """Light of recording B against recording A, matched by episode (order) and step_id."""
 
     steps: int = 0  # steps whose light/state both recordings hold
     errors: dict[str, FieldError] = dataclasses.field(default_factory=dict)
@@ -53,9 +57,11 @@ def compare(path_a: str | os.PathLike, path_b: str | os.PathLike, *,
             namespace_a: str | None = None, namespace_b: str | None = None) -> Comparison:
     """Compare the applied light (``light/state``) of two recordings.
 
-    Episodes are matched by their order in each file and steps by their number within the
-    episode, so B may come from another machine and clock (a bag replayed onto the gantry at
-    one step an hour). Beams compare x and width, spotlights x, z and radius.
+    Episodes are matched by their order in each file and steps by their step_id within the
+    episode (the step number in a realtime recording, whose step_ids are 0), so B may come from
+    another machine and clock (a bag replayed onto the gantry at one step an hour) and miss
+    steps (refused there): those are listed, per run of step_ids, as only in A or only in B.
+    Beams compare x and width, spotlights x, z and radius.
 
     Args:
         path_a: The reference recording (e.g. the simulated run).
@@ -90,11 +96,12 @@ def compare(path_a: str | os.PathLike, path_b: str | os.PathLike, *,
 
 def _compare_episode(index: int, a: Episode, b: Episode, out: Comparison) -> None:
     lights_a, lights_b = _lights(a), _lights(b)
-    for step in sorted(set(lights_a) | set(lights_b)):
-        where = f'episode {index}, step {step}'
-        if step not in lights_a or step not in lights_b:
-            out.unmatched.append(f'{where}: only in {"A" if step in lights_a else "B"}')
-            continue
+    for side, mine, other in (('A', lights_a, lights_b), ('B', lights_b, lights_a)):
+        only = sorted(set(mine) - set(other))
+        out.unmatched += [f'episode {index}, step_id {_span(run)}: only in {side}'
+                          for run in _runs(only)]
+    for step in sorted(set(lights_a) & set(lights_b)):
+        where = f'episode {index}, step_id {step}'
         light_a, light_b = lights_a[step], lights_b[step]
         if light_a.mode != light_b.mode:
             out.skipped.append(f'{where}: light mode {light_a.mode} in A, {light_b.mode} in B')
@@ -107,9 +114,25 @@ def _compare_episode(index: int, a: Episode, b: Episode, out: Comparison) -> Non
 
 
 def _lights(episode: Episode) -> dict[int, object]:
-    """Step number -> the decoded light/state of that step."""
-    return {int(record.result.step): record.outputs['light/state'].decode()
+    """step_id (the step number where step_ids are 0: realtime) -> the decoded light/state."""
+    return {int(record.result.step_id) or int(record.result.step):
+            record.outputs['light/state'].decode()
             for record in episode.steps if 'light/state' in record.outputs}
+
+
+def _runs(ids: list[int]) -> list[list[int]]:
+    """Consecutive runs of sorted ids: [1, 2, 3, 7] -> [[1, 2, 3], [7]]."""
+    runs: list[list[int]] = []
+    for i in ids:
+        if runs and i == runs[-1][-1] + 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return runs
+
+
+def _span(run: list[int]) -> str:
+    return f'{run[0]}' if len(run) == 1 else f'{run[0]}-{run[-1]}'
 
 
 def format_comparison(result: Comparison) -> str:

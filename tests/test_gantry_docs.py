@@ -1,0 +1,123 @@
+"""The README's and docs/hardware.md's gantry lines work as written (issue 23, item 10).
+
+Each command line of the docs is read from the file itself: its PATH line must find the
+executables, every calibration it names must exist and load, every replay onto the gantry
+must be a step by step one (resets included), the dry run and gantry_node must run.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import re
+import shlex
+import signal
+import subprocess
+import time
+
+import pytest
+
+from conftest import child_env
+from grbl_emulator import GrblEmulator
+from growspace_gantry import calibration
+from growspace_sim.replay.cli import build_parser
+from test_gantry_node import RIG
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / 'README.md', ROOT / 'docs' / 'hardware.md']
+
+
+def code_lines(path: Path) -> list[str]:
+    """The command lines of a markdown file's fenced blocks (continuations joined, comments
+    dropped)."""
+    out, block, joined = [], False, ''
+    for line in path.read_text(encoding='utf-8').splitlines():
+        if line.startswith('```'):
+            block = not block
+            continue
+        if not block:
+            continue
+        joined += line.split('  #')[0].rstrip()
+        if joined.endswith('\\'):
+            joined = joined[:-1] + ' '
+            continue
+        if joined.strip():
+            out.append(joined.strip())
+        joined = ''
+    return out
+
+
+def readme_path() -> list[Path]:
+    """The directories the README's ``export PATH=...`` line puts first, as they are here."""
+    line = next(x for x in code_lines(ROOT / 'README.md') if x.startswith('export PATH='))
+    value = line.split('=', 1)[1].split()[0].replace('$PWD', str(ROOT))
+    return [Path(p) for p in value.split(':') if p != '$PATH']
+
+
+def lines_of(program: str) -> list[str]:
+    return [x for doc in DOCS for x in code_lines(doc) if x.split()[0] == program]
+
+
+def test_the_readme_path_line_finds_every_gantry_program() -> None:
+    dirs = readme_path()
+    for program in ('gantry_node', 'growspace-gantry-gcode', 'sim_node', 'teleop'):
+        assert any(os.access(d / program, os.X_OK) for d in dirs), (program, dirs)
+
+
+def test_run_sh_puts_the_gantry_programs_on_path() -> None:
+    text = (ROOT / 'run.sh').read_text(encoding='utf-8')
+    assert 'install/growspace_gantry/lib/growspace_gantry' in text
+
+
+def test_every_calibration_the_docs_name_exists_and_loads() -> None:
+    named = [m.group(1) for x in lines_of('gantry_node')
+             for m in re.finditer(r'calibration:=(\S+)', x)]
+    assert named
+    for path in named:
+        calibration.load(path.replace('$PWD', str(ROOT)))
+
+
+def test_every_replay_onto_the_gantry_sends_the_resets() -> None:
+    """A replay paced by steps goes step by step (each episode's reset, then its commands);
+    ``--only light/command`` would drop the resets."""
+    replays = [x for x in lines_of('growspace-replay') if ' play ' in x and 'step' in x]
+    assert replays
+    for line in replays:
+        args = build_parser().parse_args(shlex.split(line)[1:])
+        assert args.step_period is not None and args.topics is None, line
+
+
+def test_the_dry_run_runs_as_written(tmp_path) -> None:
+    env = {**child_env(), 'PATH': os.pathsep.join([*map(str, readme_path()),
+                                                   os.environ['PATH']])}
+    for line in lines_of('growspace-gantry-gcode'):
+        line = line.replace('BAG', 'bags/oracle_control_hard.mcap')
+        done = subprocess.run(shlex.split(line), cwd=ROOT, env=env, capture_output=True,
+                              text=True, timeout=60)
+        assert done.returncode == 0, (line, done.stderr)
+        assert '$J=G21G53' in done.stdout and done.stdout.rstrip().endswith('M5')
+
+
+@pytest.mark.parametrize('line', lines_of('gantry_node'))
+def test_gantry_node_runs_as_written(tmp_path, line) -> None:
+    """The documented command line, on an emulated controller: it connects, reads ``$$`` and
+    stops on SIGINT with the lamp off."""
+    with GrblEmulator(RIG, speedup=40.0, link_dir=tmp_path) as grbl:
+        argv = shlex.split(line.replace('/dev/ttyUSB0', grbl.port).replace(
+            'bags/hw.mcap', str(tmp_path / 'hw.mcap')).replace('$PWD', str(ROOT)))
+        env = {**child_env(), 'PATH': os.pathsep.join([*map(str, readme_path()),
+                                                       os.environ['PATH']])}
+        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        try:
+            deadline = time.monotonic() + 20.0
+            while '$$' not in grbl.lines and time.monotonic() < deadline \
+                    and proc.poll() is None:
+                time.sleep(0.05)
+            assert '$$' in grbl.lines, proc.poll()
+            time.sleep(0.3)
+        finally:
+            proc.send_signal(signal.SIGINT)
+            out = proc.communicate(timeout=20)[0]
+        assert proc.returncode == 0, out
+        assert grbl.spindle[0] == 'M5'

@@ -1,0 +1,121 @@
+"""``growspace-replay play --step-period``: a lockstep episode replayed step by step onto a node.
+
+The node here is ``sim_node`` (the gantry's own replay is in test_gantry_ros.py): it answers
+every request with a ``step_result``, and its recording shows in which order it handled them.
+Started with another seed than the bag's, it places the light where the bag's episode began
+only if the replay sends the episode's reset first.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import signal
+
+import pytest
+
+from growspace_sim.replay import Bag, main, read_episodes
+from ros_helpers import NodeProcess
+
+BAG = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_hard.mcap'
+
+
+def lights(path: Path, namespace: str = '/growspace') -> dict[int, tuple[float, float]]:
+    """step_id -> (x, width) of every light/state in a recording."""
+    with Bag(path) as bag:
+        return {m.step_id: (m.x, m.width) for m in (
+            x.decode() for x in bag.messages([f'{namespace}/light/state']))}
+
+
+def handled(path: Path) -> list[tuple[str, int]]:
+    """(what, step_id) in the order the node handled them: commands, resets and results."""
+    out = []
+    with Bag(path) as bag:
+        for m in bag.messages(['/growspace/light/command', '/growspace/reset',
+                               '/growspace/step_result']):
+            msg = m.decode()
+            out.append((m.topic.rsplit('/', 1)[1], int(getattr(msg, 'step_id', 0))))
+    return out
+
+
+def sim_node(tmp_path: Path, *args: str) -> NodeProcess:
+    return NodeProcess('-p', 'seed:=1', '-p', f'record_path:={tmp_path / "node.mcap"}', *args,
+                       namespace='/growspace')
+
+
+def test_a_lockstep_episode_replays_from_its_reset_one_step_at_a_time(tmp_path, capsys):
+    node = sim_node(tmp_path)
+    try:
+        code = main(['play', str(BAG), '--step-period', '0.05', '--wait', '20'])
+    finally:
+        node.stop(signal.SIGINT)
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert '51 request(s) sent, 51 answered, 0 failed' in out
+    assert 'step 50/50 (step_id 50): done' in err
+    # The reset came first and placed the light as in the recording, and every command was
+    # sent only once the step before it was answered.
+    order = handled(tmp_path / 'node.mcap')
+    start = order.index(('reset', 0))
+    assert order[:start] == [('step_result', 0)]  # the node's own start-up episode
+    assert order[start:start + 2] == [('reset', 0), ('step_result', 0)]
+    assert order[start + 2:] == [x for k in range(1, 51)
+                                 for x in (('command', k), ('step_result', k))]
+    assert lights(tmp_path / 'node.mcap') == lights(BAG)
+
+
+def test_chosen_steps_start_where_the_recording_had_the_light(tmp_path, capsys):
+    node = sim_node(tmp_path)
+    try:
+        code = main(['play', str(BAG), '--step-period', '1.2', '--episode', '0',
+                     '--start-step', '20', '--stop-step', '21', '--wait', '20'])
+    finally:
+        node.stop(signal.SIGINT)
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    order = handled(tmp_path / 'node.mcap')
+    assert [s for what, s in order if what == 'command'] == [19, 20, 21]  # placement, steps
+    expected, got = lights(BAG), lights(tmp_path / 'node.mcap')
+    assert {k: got[k] for k in (0, 19, 20, 21)} == {k: expected[k] for k in (0, 19, 20, 21)}
+    # A long period is not silent: the step counter and when the next step goes.
+    assert 'step 1/2 (step_id 20): done' in err and 'next: step 2/2 (step_id 21) at ' in err
+
+
+@pytest.mark.parametrize('keep_going', [False, True])
+def test_a_step_that_fails_on_the_node_stops_the_replay_with_its_reason(tmp_path, capsys,
+                                                                        keep_going):
+    node = sim_node(tmp_path, '-p', 'episode_length:=10')  # steps 11.. are refused
+    try:
+        code = main(['play', str(BAG), '--step-period', '0', '--wait', '20']
+                    + (['--keep-going'] if keep_going else []))
+    finally:
+        node.stop(signal.SIGINT)
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert 'step 11/50 (step_id 11): FAILED' in err and 'episode over' in err, err
+    if keep_going:
+        assert '51 request(s) sent, 11 answered, 40 failed' in out
+    else:
+        assert '12 request(s) sent, 11 answered, 1 failed; STOPPED: episode 0, step 11/50 ' \
+            '(step_id 11) failed on the node: episode over' in out
+        commands = [s for what, s in handled(tmp_path / 'node.mcap') if what == 'command']
+        assert commands == list(range(1, 12))
+
+
+def test_step_options_need_a_step_period(capsys):
+    with pytest.raises(SystemExit):
+        main(['play', str(BAG), '--episode', '0'])
+    assert '--episode need(s) --step-period' in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['play', str(BAG), '--step-period', '1', '--only', '/growspace/light/command'])
+    assert '--only does not go with --step-period' in capsys.readouterr().err
+
+
+def test_steps_the_recording_does_not_have_are_refused_before_anything_is_sent():
+    from growspace_sim.replay import play_steps, ReplayError
+
+    with Bag(BAG) as bag:
+        assert [e.n_steps for e in read_episodes(bag)] == [50]
+    with pytest.raises(ReplayError, match='has no step_id in 60..end'):
+        play_steps(BAG, start_step=60)
+    with pytest.raises(ReplayError, match='the recording has 1 episode'):
+        play_steps(BAG, episode=1)
