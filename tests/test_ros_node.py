@@ -545,6 +545,37 @@ def test_invalid_parameter_exits_2_with_one_line() -> None:
     assert 'light_density' in lines[0] and '-5' in lines[0], lines[0]
 
 
+def _executable(package: str, name: str) -> str:
+    from ament_index_python.packages import get_package_prefix
+
+    return os.path.join(get_package_prefix(package), 'lib', package, name)
+
+
+def test_a_bad_ros_command_line_exits_2_with_one_line_for_every_node(tmp_path: Any) -> None:
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('/**:\n  ros__parameters: [1, 2\n')
+    missing = tmp_path / 'missing.yaml'
+    cases = {  # (executable, arguments): what the one line must name
+        ('sim_node', '--params-file', str(missing)): str(missing),
+        ('sim_node', '--params-file', str(broken)): str(broken),
+        ('sim_node', '-p'): '-p',
+        ('sim_node', '--no-such-flag'): '--no-such-flag',
+        ('gantry_node', '--params-file', str(missing)): str(missing),
+        ('view_node', '--params-file', str(broken)): str(broken),
+    }
+    where = {'sim_node': 'growspace_sim', 'view_node': 'growspace_sim',
+             'gantry_node': 'growspace_gantry'}
+    runs = {case: subprocess.Popen([_executable(where[case[0]], case[0]), '--ros-args',
+                                    *case[1:]], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True) for case in cases}
+    for case, proc in runs.items():  # started together: each pays its imports at once
+        out, err = proc.communicate(timeout=TIMEOUT_S)
+        lines = err.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, (case, proc.returncode, err)
+        assert lines[0].startswith(f'{case[0]}: ') and cases[case] in lines[0], (case, err)
+        assert 'Traceback' not in err and '/project/src' not in err, (case, err)
+
+
 # ----------------------------------------------------------------------------- 8. recording
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_recording_is_finished_by_a_signal_and_resimulates(tmp_path: Any, sig: int) -> None:

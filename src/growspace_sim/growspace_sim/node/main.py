@@ -1,7 +1,8 @@
 """``sim_node`` entry point: the chamber node on rclpy (the Jazzy ``talker.py`` pattern).
 
 Exit codes: 0 after SIGINT or SIGTERM, whenever it comes (the recording is finished first);
-2 for an invalid parameter (one line on stderr naming it, its value and what is allowed).
+2 for an invalid parameter (one line on stderr naming it, its value and what is allowed) or a
+ROS command line rcl cannot parse (a missing or broken params file, a bad ``-p`` or ``-r``).
 Unknown parameters (a typo in ``-p`` or a params file) are reported and ignored, as ROS does for
 undeclared ones, but never silently.
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -55,6 +57,26 @@ def installed_executable() -> str:
     return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim', 'sim_node')
 
 
+def ros_arguments_error(argv: Sequence[str]) -> str | None:
+    """Why rcl cannot parse a ROS command line, in one line; None if it can.
+
+    rcl parses it (params files included) exactly as ``rclpy.init`` would, but without a
+    context, so nothing is started and rcl logs nothing.
+
+    Args:
+        argv: the whole command line, executable first.
+    """
+    from rclpy.utilities import remove_ros_args
+
+    try:
+        remove_ros_args(list(argv))
+    except RuntimeError as e:  # rclpy's RCLInvalidROSArgsError and UnknownROSArgsError
+        text = re.sub(r', at \S+:\d+', '', str(e))  # rcl's source locations mean nothing here
+        text = text.removeprefix('Failed to parse ROS arguments: ')
+        return ' '.join(text.split())
+    return None
+
+
 class Closeable(Protocol):
     def close(self) -> None: ...
 
@@ -79,10 +101,14 @@ def run_node(executable: str, node_name: str, argv: Sequence[str], stop: threadi
         automatic_overrides: Declare every ``-p``/params-file value (see ``RclpyTransport``).
 
     Returns:
-        The exit status: 0 after a signal, 2 for an invalid parameter.
+        The exit status: 0 after a signal, 2 for an invalid parameter or command line.
     """
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
+    error = ros_arguments_error([executable, *argv])
+    if error is not None:
+        print(f'{executable}: invalid ROS arguments: {error}', file=sys.stderr)
+        return EXIT_BAD_PARAM
     transport: RclpyTransport | None = None
     node: Closeable | None = None
     try:
