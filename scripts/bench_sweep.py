@@ -58,20 +58,23 @@ def main() -> int:
         start = time.perf_counter()
         sweep.connect(None, args.cpus)
         startup = time.perf_counter() - start
-        warm = sweep.Spec('warm-up', spec.episodes, 0, spec.trials[:1])
-        start = time.perf_counter()
-        sweep.run_sweep(warm, Path(tmp) / 'warm-up', workers=1, verbose=0)
-        first = time.perf_counter() - start
-        for workers in map(int, args.workers.split(',')):
+        try:
+            warm = sweep.Spec('warm-up', spec.episodes, 0, spec.trials[:1])
             start = time.perf_counter()
-            outcomes = sweep.run_sweep(spec, Path(tmp) / f'w{workers}', workers=workers,
-                                       verbose=0,
-                                       reuse_actors=not args.fresh_processes)
-            wall = time.perf_counter() - start
-            assert len(outcomes) == len(spec.trials) and not any(o.error for o in outcomes)
-            work = sum(o.summary['wall_s'] for o in outcomes)
-            rows.append(dict(mode='Ray Tune', workers=workers, wall_s=wall, work_s=work,
-                             overhead_s=(wall * workers - work) / len(outcomes)))
+            sweep.run_sweep(warm, Path(tmp) / 'warm-up', workers=1, verbose=0)
+            first = time.perf_counter() - start
+            for workers in map(int, args.workers.split(',')):
+                start = time.perf_counter()
+                outcomes = sweep.run_sweep(spec, Path(tmp) / f'w{workers}', workers=workers,
+                                           verbose=0,
+                                           reuse_actors=not args.fresh_processes)
+                wall = time.perf_counter() - start
+                assert len(outcomes) == len(spec.trials) and not any(o.error for o in outcomes)
+                work = sum(o.summary['wall_s'] for o in outcomes)
+                rows.append(dict(mode='Ray Tune', workers=workers, wall_s=wall, work_s=work,
+                                 overhead_s=(wall * workers - work) / len(outcomes)))
+        finally:
+            sweep.disconnect()  # every Ray process, agents included, before the figures
     print(f'{len(spec.trials)} trials of {args.agent} on {args.env} '
           f'({args.episodes} evaluation episodes'
           + (f', {args.steps} training steps' if args.agent in sweep.LEARNERS else '')

@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+import functools
+import json
 import os
+import pickle
 import signal
+import subprocess
+import sys
+import threading
 import time
 
 import gymnasium as gym
@@ -13,7 +19,9 @@ import pytest
 
 from bridge_helpers import assert_same_transition, loopback_domain
 import growspace_gym_bridge  # noqa: F401 - registers the GrowSpaceROS ids
-from growspace_gym_bridge import BridgeTimeout, NodeDied
+from conftest import child_env
+from growspace_gym_bridge import BridgeTimeout, CommandRejected, NodeDied
+from growspace_gym_bridge.errors import BridgeError
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_sim.envs.env import GrowSpaceEnv
 
@@ -119,3 +127,128 @@ def test_vector_env_of_two_bridged_envs(mode: str) -> None:
     finally:
         vec.close()
         local.close()
+
+
+# --- errors cross process boundaries; nodes never outlive their env (issue 24, item 1) -------
+
+ERRORS = [NodeDied('/gs_a', -9, ['last line', 'another'], '/gs_a/step_result (step_id 2)'),
+          NodeDied('/gs_b', None), BridgeTimeout('/gs_a/step_result', 0.5, 3, 7, 'no reply'),
+          CommandRejected('/gs_a/light/command: step_id 4 refused: error: x = nan ...'),
+          BridgeError('sim node /gs_a runs in realtime mode')]
+CLOSE_BOUND_S = 15.0  # close() of a vector env with one dead or stalled node [s]
+GONE_WITHIN_S = 10.0  # a node or worker whose owner died is gone by then [s]
+
+
+@pytest.mark.parametrize('error', ERRORS, ids=lambda e: type(e).__name__)
+def test_every_bridge_error_survives_pickle_with_its_text_and_fields(error) -> None:
+    back = pickle.loads(pickle.dumps(error))
+    assert type(back) is type(error) and str(back) == str(error)
+    assert back.__dict__ == error.__dict__
+    # Gymnasium's AsyncVectorEnv raises type(error)(error) in the parent.
+    again = type(back)(back)
+    assert type(again) is type(error) and str(again) == str(error)
+    assert again.__dict__ == error.__dict__
+
+
+def running(pid: int) -> bool:
+    """Whether a process exists and is not a zombie (a dead child nobody reaped yet)."""
+    try:
+        with open(f'/proc/{pid}/stat') as f:
+            return f.read().rsplit(')', 1)[1].split()[0] not in 'ZX'
+    except FileNotFoundError:
+        return False
+
+
+def wait_gone(pids: list[int], within_s: float = GONE_WITHIN_S) -> list[int]:
+    """The pids still running after ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while any(running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return [p for p in pids if running(p)]
+
+
+def _async_bridged(**kwargs) -> gym.vector.AsyncVectorEnv:
+    # 'module:id' makes a spawned worker import the module that registers the id.
+    make = functools.partial(gym.make, f'growspace_gym_bridge:{BRIDGED}', **kwargs)
+    return gym.vector.AsyncVectorEnv([make, make], context='spawn')
+
+
+@pytest.mark.parametrize('fault', ['killed', 'stalled'])
+def test_async_vector_env_hands_the_parent_the_workers_error(fault: str) -> None:
+    vec = _async_bridged(timeout_s=1.0)
+    nodes, namespaces = list(vec.get_attr('node_pid')), vec.get_attr('namespace')
+    workers = [p.pid for p in vec.processes]
+    expected = NodeDied if fault == 'killed' else BridgeTimeout
+    try:
+        vec.reset(seed=[1, 2])
+        os.kill(nodes[0], signal.SIGKILL if fault == 'killed' else signal.SIGSTOP)
+        with pytest.raises(expected) as caught:
+            vec.step(np.array([0, 1]))
+        assert namespaces[0] in str(caught.value) and namespaces[1] not in str(caught.value)
+        if fault == 'killed':
+            assert caught.value.returncode == -signal.SIGKILL
+            assert 'exited with code -9 while the bridge waited for' in str(caught.value)
+        else:
+            assert caught.value.step_id == 1 and caught.value.timeout_s == 1.0
+            assert 'no reply to light/command for step_id 1' in str(caught.value)
+    finally:
+        start = time.monotonic()
+        vec.close()
+        closing = time.monotonic() - start
+    assert closing < CLOSE_BOUND_S
+    assert wait_gone(nodes + workers) == []
+
+
+def test_a_node_lives_as_long_as_its_process_not_the_thread_that_made_it() -> None:
+    made = []
+
+    def make() -> None:
+        made.append(GrowSpaceBridgeEnv('control', 'easy'))
+        made[0].reset(seed=1)  # the node is up before the thread ends
+
+    thread = threading.Thread(target=make)
+    thread.start()
+    thread.join()
+    env = made[0]
+    try:
+        time.sleep(0.5)  # Linux's parent-death signal (thread-scoped) would have come by now
+        assert env.step(0)[4]['step'] == 1 and env.node.poll() is None
+    finally:
+        env.close()
+
+
+TRAINER = f"""
+import functools, json, sys, time
+import gymnasium as gym
+import growspace_gym_bridge
+if __name__ == '__main__':
+    make = functools.partial(gym.make, 'growspace_gym_bridge:{BRIDGED}')
+    vec = gym.vector.AsyncVectorEnv([make, make], context='spawn')
+    vec.reset(seed=[1, 2])
+    pids = list(vec.get_attr('node_pid')) + [p.pid for p in vec.processes]
+    print(json.dumps(pids), flush=True)
+    if sys.argv[1] == 'trainer':
+        import os, signal
+        os.kill(pids[0], signal.SIGSTOP)
+    time.sleep(60)
+"""
+
+
+@pytest.mark.parametrize('victim', ['trainer', 'worker'])
+def test_no_node_outlives_a_killed_trainer_or_worker(victim: str) -> None:
+    # trainer: SIGKILL the vector env's process while one node is stalled (SIGSTOP); worker:
+    # SIGKILL the worker process that started the first node.
+    trainer = subprocess.Popen([sys.executable, '-c', TRAINER, victim], stdout=subprocess.PIPE,
+                               text=True, env=child_env())
+    pids: list[int] = []
+    try:
+        pids = json.loads(trainer.stdout.readline())
+        os.kill(trainer.pid if victim == 'trainer' else pids[2], signal.SIGKILL)
+        assert wait_gone(pids if victim == 'trainer' else pids[:1]) == []
+    finally:
+        trainer.kill()
+        trainer.wait()
+        for pid in pids:
+            if running(pid):
+                os.kill(pid, signal.SIGCONT)
+                os.kill(pid, signal.SIGKILL)

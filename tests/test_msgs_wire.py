@@ -236,3 +236,34 @@ def test_new_fills_defaults_and_checks_fields() -> None:
     assert msg.header.frame_id == '' and msg.step == 0
     with pytest.raises(TypeError, match='no field'):
         types.new(types.PLANT_STATE, nodes=[])
+
+
+@pytest.mark.parametrize('values, field, allowed', [
+    ('{step_id: -1}', 'step_id = -1', r'an integer in \[0, 18446744073709551615\] \(uint64\)'),
+    ('{step_id: 18446744073709551616}', 'step_id = 18446744073709551616', 'uint64'),
+    ('{x: abc}', "x = 'abc'", r'a number \(float64\)'),
+    ('{mode: true}', 'mode = True', r'an integer in \[0, 255\] \(uint8\)'),
+    ('{action: 2.5}', 'action = 2.5', r'\(int32\)'),
+    ('{header: {stamp: {sec: 1.5}}}', 'header.stamp.sec = 1.5', r'\(int32\)'),
+    ('{header: {frame_id: 7}}', 'header.frame_id = 7', 'a string'),
+    ('{header: 3}', 'header = 3', 'a mapping of the fields of std_msgs/msg/Header'),
+    ('{continuous: [0.5, .nan, 1.0e+39]}', r'continuous\[2\] = 1e\+39', r'\|x\| <= 3.4e38'),
+    ('{continuous: 0.5}', 'continuous = 0.5', 'a list'),
+])
+def test_pub_names_the_field_the_value_and_what_is_allowed(capsys, values, field, allowed):
+    from growspace_sim.tools import pub  # noqa: PLC0415
+
+    assert pub.main(['/light/command', types.LIGHT_COMMAND, values, '--wait', '0']) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert re.search(rf'^pub: {field} is not allowed; expected .*{allowed}', err), err
+
+
+def test_from_plain_accepts_every_value_its_field_can_hold():
+    msg = types.from_plain(types.LIGHT_COMMAND, {
+        'step_id': 2 ** 64 - 1, 'mode': 255, 'action': -2 ** 31, 'x': 1, 'z': -0.5,
+        'continuous': [-1, 0.5, float('nan'), float('inf')],
+        'header': {'stamp': {'sec': -1, 'nanosec': 2 ** 32 - 1}, 'frame_id': 'chamber'}})
+    back = types.deserialize(types.serialize(msg, types.LIGHT_COMMAND), types.LIGHT_COMMAND)
+    assert (back.step_id, back.mode, back.action, back.x) == (2 ** 64 - 1, 255, -2 ** 31, 1.0)
+    assert back.header.stamp.nanosec == 2 ** 32 - 1 and back.continuous.tolist()[:2] == [-1, 0.5]

@@ -191,6 +191,23 @@ def test_bad_command_gets_an_error_result_and_no_step(fields: dict, named: str) 
     assert last_result(transport).step == 1 and last_result(transport).info == ''
 
 
+@pytest.mark.parametrize(('topic', 'msg', 'named'), [
+    ('light/command', command(1, convert.MODE_CONTINUOUS, continuous=np.full(100_000, 0.5)),
+     'continuous = array('),
+    ('light/command', command(1, convert.MODE_CONTINUOUS, continuous=np.full(100_000, np.nan)),
+     'continuous = array('),
+    ('reset', reset(1, challenge='c' * 100_000), "challenge = 'ccc"),
+    ('reset', reset(1, setting='s' * 100_000), "setting = 'sss"),
+])
+def test_an_error_reply_quotes_a_huge_input_briefly(topic: str, msg: object, named: str) -> None:
+    transport, _ = make()
+    sent = transport.inject(topic, msg)
+    (result, cdr), = transport.published['/chamber1/step_result'][1:]
+    assert len(sent) > 100_000 and result.info.startswith(f'error: {named}')
+    assert len(result.info) < 500 and len(cdr) < 1_000  # the error reply, not an echo
+    assert len(transport.warnings[-1]) < 600
+
+
 def test_absolute_command_is_clamped_and_reported_on_light_state() -> None:
     transport, node = make()
     transport.inject('light/command', command(1, convert.MODE_BEAM, x=99.0, width=0.0))

@@ -7,10 +7,12 @@ the read-back can be compared with what was "published".
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
 from pathlib import Path
+import resource
 import signal
 import subprocess
 import sys
@@ -32,7 +34,7 @@ from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.recording import McapRecorder, RecordingError
-from growspace_sim.recording.chunk_writer import record_bytes
+from growspace_sim.recording.chunk_writer import ChunkedWriter, record_bytes
 from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import TOPICS
@@ -346,3 +348,41 @@ def test_hand_packed_chunk_and_index_records_are_mcaps_own(recorded):
         messages = breakup_chunk(chunk, validate_crc=True)
         assert record_bytes(*messages) == zstandard.ZstdDecompressor().decompress(
             chunk.data, ci.uncompressed_size)
+
+
+def _no_file_writes() -> None:
+    """In a child before exec: every write to a file fails (EFBIG), as on a full disk."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+
+
+def test_disk_full_at_start_leaves_no_empty_file_that_blocks_the_next_start(tmp_path):
+    path = tmp_path / 'start.mcap'
+    script = (f'from growspace_sim.recording import McapRecorder, RecordingError\n'
+              f'try:\n    McapRecorder({str(path)!r})\n'
+              f'except RecordingError as e:\n    print(e)\n')
+    out = subprocess.run([sys.executable, '-c', script], env=_env(), capture_output=True,
+                         text=True, timeout=60, preexec_fn=_no_file_writes)
+    assert 'Cannot write recording' in out.stdout and 'File too large' in out.stdout, out
+    assert not path.exists()  # the 0-byte file it created is gone
+    with McapRecorder(path) as rec:  # the disk has room again: the same path works
+        rec.add_channel('/x', types.STEP_RESULT, ros_qos.DEFAULT)
+    assert path.stat().st_size > 0
+
+
+def test_a_failed_start_never_removes_a_file_it_did_not_create(tmp_path, monkeypatch):
+    path = tmp_path / 'theirs.mcap'
+    path.write_bytes(b'')  # someone else's empty file: not ours to remove
+    with pytest.raises(RecordingError, match='exists already'):
+        McapRecorder(path)
+    assert path.exists()
+
+    def no_space(*args, **kwargs):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+    monkeypatch.setattr(ChunkedWriter, 'start', no_space)
+    with pytest.raises(RecordingError, match='No space left on device'):
+        McapRecorder(path, overwrite=True)  # asked to replace it: it stays, emptied
+    assert path.exists()
+    with pytest.raises(RecordingError, match='No space left on device'):
+        McapRecorder(tmp_path / 'mine.mcap')
+    assert not (tmp_path / 'mine.mcap').exists()

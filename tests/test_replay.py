@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 import subprocess
 import sys
@@ -280,3 +281,47 @@ def test_rosbag2_v8_qos_integers_and_garbage() -> None:
         'reliable', '1').replace('transient_local', '1').replace('automatic', '1')
     assert parse_qos(v8) == ros_qos.LATCHED
     assert parse_qos('') == parse_qos('not: [yaml') == parse_qos('- {}') == ros_qos.DEFAULT
+
+
+@pytest.mark.parametrize('option, value, message', [
+    ('--fps', '-1', r'fps = -1.0 is not allowed; expected frames per second in \[0.1, 100.0\]'),
+    ('--fps', '0', r'fps = 0.0 is not allowed'),
+    ('--fps', 'nan', r'fps = nan is not allowed'),
+    ('--fps', '1e9', r'fps = 1000000000.0 is not allowed'),
+    ('--scale', '0', r'scale = 0 is not allowed; expected an integer in \[1, 16\]'),
+    ('--scale', '100000', r'scale = 100000 is not allowed'),
+])
+def test_export_options_out_of_range_are_one_line_and_exit_2(tmp_path, capsys, option, value,
+                                                              message):
+    from growspace_sim.replay.cli import main  # noqa: PLC0415
+
+    out = tmp_path / 'e.gif'
+    assert main(['export', str(BAGS / 'oracle_control_easy.mcap'), str(out), option,
+                 value]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith('growspace-replay: error: ')
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+def test_export_help_states_the_bounds(capsys):
+    from growspace_sim.replay.cli import main  # noqa: PLC0415
+
+    with pytest.raises(SystemExit):
+        main(['export', '--help'])
+    text = ' '.join(capsys.readouterr().out.split())
+    assert 'frames per second, 0.1..100.0' in text and 'upscaling of each frame, 1..16' in text
+
+
+def test_export_brings_an_extreme_recorded_rate_into_range(tmp_path):
+    from PIL import Image  # noqa: PLC0415
+
+    path = tmp_path / 'slow.mcap'
+    with McapRecorder(path) as rec:  # a real plant on the gantry: one step an hour
+        EpisodeRunner(SimConfig(episode_length=3), rec, rate_hz=1 / 3600).run_episode(
+            OracleAgent().act, 1)
+    warnings: list[str] = []
+    replay.export_episode(path, tmp_path / 's.gif', progress=False, warn=warnings.append)
+    with Image.open(tmp_path / 's.gif') as gif:
+        assert gif.info['duration'] == 10_000  # 0.1 frames per second
+    assert any('outside [0.1, 100.0] frames per second' in w for w in warnings)

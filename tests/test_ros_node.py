@@ -9,11 +9,13 @@ loopback-only network namespace (``unshare -n``), as ``./run.sh test`` does.
 from __future__ import annotations
 
 from collections.abc import Iterator
+import json
 import os
 import secrets
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -547,6 +549,37 @@ def test_invalid_parameter_exits_2_with_one_line() -> None:
     assert 'light_density' in lines[0] and '-5' in lines[0], lines[0]
 
 
+def _executable(package: str, name: str) -> str:
+    from ament_index_python.packages import get_package_prefix
+
+    return os.path.join(get_package_prefix(package), 'lib', package, name)
+
+
+def test_a_bad_ros_command_line_exits_2_with_one_line_for_every_node(tmp_path: Any) -> None:
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('/**:\n  ros__parameters: [1, 2\n')
+    missing = tmp_path / 'missing.yaml'
+    cases = {  # (executable, arguments): what the one line must name
+        ('sim_node', '--params-file', str(missing)): str(missing),
+        ('sim_node', '--params-file', str(broken)): str(broken),
+        ('sim_node', '-p'): '-p',
+        ('sim_node', '--no-such-flag'): '--no-such-flag',
+        ('gantry_node', '--params-file', str(missing)): str(missing),
+        ('view_node', '--params-file', str(broken)): str(broken),
+    }
+    where = {'sim_node': 'growspace_sim', 'view_node': 'growspace_sim',
+             'gantry_node': 'growspace_gantry'}
+    runs = {case: subprocess.Popen([_executable(where[case[0]], case[0]), '--ros-args',
+                                    *case[1:]], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True) for case in cases}
+    for case, proc in runs.items():  # started together: each pays its imports at once
+        out, err = proc.communicate(timeout=TIMEOUT_S)
+        lines = err.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, (case, proc.returncode, err)
+        assert lines[0].startswith(f'{case[0]}: ') and cases[case] in lines[0], (case, err)
+        assert 'Traceback' not in err and '/project/src' not in err, (case, err)
+
+
 # ----------------------------------------------------------------------------- 8. recording
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_recording_is_finished_by_a_signal_and_resimulates(tmp_path: Any, sig: int) -> None:
@@ -598,3 +631,103 @@ def test_sigterm_during_start_up_exits_cleanly(delay_s: float, import_s: float) 
             proc.wait()
     assert proc.returncode == 0, (proc.returncode, err[-2000:])
     assert 'Traceback' not in err, err[-2000:]
+
+
+# Closing (issue 24 items 4, 5): run in child processes, signals and all, with faults injected.
+CLOSING_PROBE = """
+import json, os, signal, sys, threading
+from growspace_sim.node import main as node_main
+
+seen = {}
+
+
+class Probe:
+    '''A node with a 1 kHz timer that notes whether its context was up at each call.'''
+
+    def __init__(self, transport):
+        self.transport, self.calls = transport, []
+        transport.create_timer(0.001, lambda: self.calls.append(transport.context.ok()))
+
+    def close(self):
+        seen.update(up_at_close=self.transport.context.ok(), calls=len(self.calls),
+                    calls_after_shutdown=self.calls.count(False))
+
+
+def run(argv, stop):
+    threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
+    return node_main.run_node('probe', 'probe', argv, stop, Probe)
+
+
+code = node_main.console_main(run, ['--ros-args', '-r', '__ns:=' + sys.argv[1]])
+print(json.dumps({**seen, 'code': code}))
+"""
+
+HANGING_CLOSE = """
+import sys, time
+import rclpy.node
+from growspace_sim.node import main as node_main
+
+
+def destroy_node(self):  # a close that never returns
+    time.sleep(3600)
+
+
+rclpy.node.Node.destroy_node = destroy_node
+node_main.CLOSE_TIMEOUT_S = 2.0
+sys.exit(node_main.main(['--ros-args', '-r', '__ns:=' + sys.argv[1], '-p', 'mode:=realtime',
+                         '-p', 'rate_hz:=100.0']))
+"""
+
+
+def test_a_signal_leaves_the_context_up_until_the_node_is_closed() -> None:
+    from conftest import child_env
+
+    out = subprocess.run([sys.executable, '-c', CLOSING_PROBE, f'{NAMESPACE}_probe'],
+                         capture_output=True, text=True, timeout=TIMEOUT_S, env=child_env())
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout.strip().splitlines()[-1])
+    assert seen['code'] == 0 and seen['calls'] > 100  # the timer ran until the signal
+    assert seen['up_at_close'] and seen['calls_after_shutdown'] == 0
+    assert 'context is invalid' not in out.stderr and 'Traceback' not in out.stderr
+
+
+def _start_hanging_node(ns: str) -> tuple[subprocess.Popen, Any]:
+    from conftest import child_env
+
+    log = tempfile.TemporaryFile('w+')
+    proc = subprocess.Popen([sys.executable, '-c', HANGING_CLOSE, ns], stdout=log,
+                            stderr=subprocess.STDOUT, text=True, env=child_env())
+    deadline = time.monotonic() + TIMEOUT_S
+    while 'realtime mode' not in _read(log):
+        assert proc.poll() is None and time.monotonic() < deadline, _read(log)[-2000:]
+        time.sleep(0.05)
+    return proc, log
+
+
+def _read(log: Any) -> str:
+    log.seek(0)
+    return log.read()
+
+
+@pytest.mark.parametrize('second', [None, signal.SIGTERM], ids=['watchdog', 'second-signal'])
+def test_closing_that_hangs_is_bounded(second: int | None) -> None:
+    proc, log = _start_hanging_node(f'{NAMESPACE}_hang_{second or 0}')
+    try:
+        proc.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        if second is not None:
+            time.sleep(0.5)  # closing has begun and hangs
+            proc.send_signal(second)
+        proc.wait(timeout=10.0)  # never, before: spinning in destroy_node, deaf to SIGTERM
+        took = time.monotonic() - start
+        text = _read(log)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        log.close()
+    if second is None:  # the watchdog: every thread's stack, then exit 1
+        assert proc.returncode == 1 and 1.5 < took < 6.0, (proc.returncode, took, text[-3000:])
+        assert 'Timeout' in text and 'destroy_node' in text and 'run_node' in text, text[-3000:]
+    else:  # the second signal's default action, at once
+        assert proc.returncode == -second and took < 3.0, (proc.returncode, took)

@@ -8,6 +8,7 @@ a child process that is killed with SIGKILL.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib.util
 import json
@@ -39,10 +40,10 @@ def local_ray():
         for name in ('RAY_ADDRESS', 'RAY_USAGE_STATS_ENABLED',
                      'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER'):
             patch.delenv(name, raising=False)
-        sweep.connect(None, workers=2)
+        assert sweep.connect(None, workers=2) is not None
         import ray  # noqa: PLC0415
         yield ray
-        ray.shutdown()
+        sweep.disconnect()
 
 
 def _write_spec(path: Path, runs: list[dict], episodes: int = 4, eval_seed: int = 0) -> Path:
@@ -127,11 +128,15 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
         child = subprocess.Popen(
             [sys.executable, '-m', 'growspace_sim.sweep', str(spec), '--out', str(out),
              '--workers', '1', '--quiet', '--no-plots'],
-            env=env, stdout=log, stderr=subprocess.STDOUT)
-        _wait_for(lambda: _finished(out), 3, child, tmp_path / 'killed.log')
-        killed = time.time()
-        child.send_signal(signal.SIGKILL)
-        child.wait(timeout=30)
+            env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            _wait_for(lambda: _finished(out), 3, child, tmp_path / 'killed.log')
+            killed = time.time()
+            child.send_signal(signal.SIGKILL)
+            child.wait(timeout=30)
+        finally:
+            # The killed sweep's own Ray: its agents would outlive it for about a minute.
+            assert _stop_group(child.pid) == []
     finished = _finished(out)  # one more may have finished before the signal landed
     assert 3 <= len(finished) < n, 'the sweep was not killed mid-way'
     assert all(len(runs) == 1 for runs in finished.values())
@@ -183,6 +188,64 @@ def test_a_tune_state_cut_short_is_set_aside_and_every_trial_runs_again(
     again = _read_csv(out / 'trials.csv')
     assert [(r['key'], r['status'], r['mean'], r['se']) for r in again] == \
         [(r['key'], r['status'], r['mean'], r['se']) for r in first]
+
+
+def _group(pgid: int) -> list[int]:
+    """The live (not zombie) processes of a process group."""
+    found = []
+    for stat in Path('/proc').glob('[0-9]*/stat'):
+        try:
+            fields = stat.read_text().rsplit(')', 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        if int(fields[2]) == pgid and fields[0] not in 'ZX':
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _stop_group(pgid: int, within_s: float = 10.0) -> list[int]:
+    """SIGKILL a process group we started; the pids still alive after ``within_s``."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(pgid, signal.SIGKILL)
+    deadline = time.monotonic() + within_s
+    while _group(pgid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return _group(pgid)
+
+
+PRIVATE_SESSION = """
+import json, os
+from growspace_sim import sweep
+context = sweep.connect(None, 1)
+import ray
+assert ray.get(ray.remote(lambda: 7).remote()) == 7
+print(json.dumps(context.address_info['session_dir']), flush=True)
+sweep.disconnect()
+"""
+
+
+def test_a_local_ray_keeps_its_sessions_private_and_stops_completely():
+    env = child_env()
+    env.pop('RAY_ADDRESS', None)
+    child = subprocess.Popen([sys.executable, '-c', PRIVATE_SESSION], env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             start_new_session=True)
+    try:
+        out, err = child.communicate(timeout=120)
+        assert child.returncode == 0, err[-2000:]
+        # Every Ray process it started (gcs, raylet, dashboard head, agents) is gone.
+        deadline = time.monotonic() + 10.0
+        while _group(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _group(child.pid) == []
+    finally:
+        _stop_group(child.pid)
+    session = Path(json.loads(out.strip().splitlines()[-1]))
+    root = Path(sweep.private_temp_dir())
+    assert session.parent == root and session.is_dir()
+    # Ray opens its own folders to everyone (0777); their parent lets nobody else in.
+    info = root.parent.stat()
+    assert info.st_uid == os.getuid() and info.st_mode & 0o077 == 0, oct(info.st_mode)
 
 
 def _finished(out: Path) -> dict[str, list[dict]]:

@@ -114,3 +114,98 @@ def test_a_recorded_toy_episode_re_simulates_bit_for_bit(tall, tmp_path):
     report = replay.resimulate(path)
     assert report.ok, report.mismatch
     assert (report.episodes, report.steps) == (2, 30)
+
+
+# --- tasks that misbehave or leave things out never crash the chamber (issue 24) ------------
+
+def no_target_layout(cfg: SimConfig, rng: np.random.Generator) -> Layout:
+    """A stem in the middle and nothing to reach: ``Layout`` allows ``target=None``."""
+    return Layout((cfg.chamber_width / 2,), None, light_x=cfg.chamber_width / 2)
+
+
+def nan_score(state: ChamberState, cfg: SimConfig) -> Score:
+    """A broken reward: NaN from the third step on (finite before, as a real bug would be)."""
+    reward = float('nan') if state.steps >= 3 else 0.5
+    return reward, np.array([reward]), False
+
+
+BARE = Task(name='bare', env_name='Bare', layout=no_target_layout, score=tall_score,
+            oracle=StayOracle, settings=('easy',))
+BROKEN = Task(name='broken', env_name='Broken', layout=tall_layout, score=nan_score,
+              oracle=StayOracle, settings=('easy',))
+
+
+@pytest.fixture
+def misbehaving():
+    tasks.register(BARE)
+    tasks.register(BROKEN)
+    yield
+    tasks.unregister(BARE.name)
+    tasks.unregister(BROKEN.name)
+
+
+def test_a_task_without_a_target_renders_plant_and_light_only(misbehaving):
+    register_envs()
+    env = gym.make(env_id('bare', 'easy'))
+    observation, _ = env.reset(seed=4)
+    assert observation[..., 0].max() == 0  # red: the target channel stays empty
+    assert observation[..., 1].max() > 0 and observation[..., 2].max() > 0  # plant, light
+    for _ in range(5):
+        observation, reward, *_ = env.step(BEAM_ACTIONS.index('stay'))
+    assert observation[..., 0].max() == 0 and np.isfinite(reward)
+    env.close()
+
+
+def _result_reward_on_the_wire(cdr: bytes) -> float:
+    """The reward of a StepResult as its CDR bytes carry it (decoded again, not trusted)."""
+    from growspace_sim.ros import types  # noqa: PLC0415
+
+    return float(types.deserialize(cdr, types.STEP_RESULT).reward)
+
+
+def test_a_nan_reward_ends_the_episode_with_the_reason_and_never_reaches_the_wire(misbehaving):
+    from growspace_sim.node.chamber_node import EPISODE_OVER, ChamberNode  # noqa: PLC0415
+    from growspace_sim.node.fake import FakeTransport  # noqa: PLC0415
+    from growspace_sim.node.params import NodeParams  # noqa: PLC0415
+    from growspace_sim.ros import convert, types  # noqa: PLC0415
+
+    transport = FakeTransport(namespace='/chamber1')
+    node = ChamberNode(transport, SimConfig(challenge='broken'), NodeParams(seed=3))
+    results = transport.published['/chamber1/step_result']
+    for step_id in (1, 2, 3, 4):
+        transport.inject('light/command', types.new(types.LIGHT_COMMAND, step_id=step_id,
+                                                    mode=convert.MODE_DISCRETE, action=2))
+    answers = [msg for msg, _ in results]
+    assert [(r.step_id, r.truncated) for r in answers] == [(0, False), (1, False), (2, False),
+                                                            (3, True), (4, True)]
+    assert all(np.isfinite(_result_reward_on_the_wire(cdr)) for _, cdr in results)
+    assert answers[2].reward == 0.5 and answers[3].reward == 0.0
+    assert 'reward is not finite' in answers[3].info and 'nan' in answers[3].info
+    assert answers[4].info == EPISODE_OVER  # the episode is over until a reset
+    assert any('reward is not finite' in w for w in transport.warnings)
+    # The node lives on: a reset to a sound challenge plays normally.
+    transport.inject('reset', types.new(types.RESET_REQUEST, reset_id=1, challenge='control'))
+    transport.inject('light/command', types.new(types.LIGHT_COMMAND, step_id=1,
+                                                mode=convert.MODE_DISCRETE, action=2))
+    assert (results[-1][0].step_id, results[-1][0].info) == (1, '') and node.cfg.task.name == \
+        'control'
+    node.close()
+
+
+def test_a_task_whose_first_reward_is_nan_still_starts_the_node(misbehaving):
+    from growspace_sim.node.chamber_node import ChamberNode  # noqa: PLC0415
+    from growspace_sim.node.fake import FakeTransport  # noqa: PLC0415
+    from growspace_sim.node.params import NodeParams  # noqa: PLC0415
+
+    always_nan = Task(name='always_nan', env_name='AlwaysNan', layout=tall_layout,
+                      score=lambda state, cfg: (float('nan'), np.array([np.inf]), False),
+                      settings=('easy',))
+    tasks.register(always_nan)
+    try:
+        transport = FakeTransport()
+        ChamberNode(transport, SimConfig(challenge='always_nan'), NodeParams(seed=1)).close()
+    finally:
+        tasks.unregister(always_nan.name)
+    (result, cdr), = transport.published['/step_result']  # the reset's answer
+    assert result.truncated and 'reward is not finite' in result.info
+    assert np.isfinite(_result_reward_on_the_wire(cdr)) and np.isfinite(result.plant_rewards).all()

@@ -111,7 +111,9 @@ class GrowSpaceBridgeEnv(gym.Env, EzPickle):
     ## Errors
     ``BridgeTimeout`` (a ``TimeoutError``) names the topic, step id and timeout; ``NodeDied``
     the node's exit code and last stderr lines; ``CommandRejected`` (a ``ValueError``) the
-    node's reason for refusing a command or reset.
+    node's reason for refusing a command or reset. Each survives pickling with its text and
+    fields, so ``AsyncVectorEnv`` hands the parent the error its worker saw. A node the env
+    starts stops by itself once the process that started it is gone.
     """
 
     metadata = {'render_modes': ['rgb_array'], 'render_fps': 10}

@@ -1,11 +1,17 @@
-"""What the bridge raises: each error names the topic, the ids and the timeout involved."""
+"""What the bridge raises: each error names the topic, the ids and the timeout involved.
+
+Every one survives ``pickle`` with its text and fields (``StructuredError``), so a vector env's
+worker hands its parent the very error it saw.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+from growspace_sim.core.errors import StructuredError
 
-class BridgeError(Exception):
+
+class BridgeError(StructuredError):
     """Base class of the errors of the Gymnasium bridge."""
 
 

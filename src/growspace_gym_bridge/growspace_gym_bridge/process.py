@@ -6,6 +6,7 @@ from collections.abc import Mapping
 import json
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import tempfile
@@ -17,7 +18,7 @@ from growspace_sim.ros import loopback
 
 import growspace_gym_bridge
 
-STOP_TIMEOUT_S = 5.0  # SIGTERM, then SIGKILL after this long [s]
+STOP_TIMEOUT_S = 5.0  # SIGTERM (and SIGCONT), then SIGKILL after this long [s]
 TAIL_BYTES = 8192  # how much of the node's stderr an error quotes at most
 PARENT_ENV = 'GROWSPACE_BRIDGE_PARENT'  # read by growspace_gym_bridge.launcher
 
@@ -52,6 +53,8 @@ def _package_roots() -> list[str]:
 def _reap(proc: subprocess.Popen, timeout_s: float) -> int:
     if proc.poll() is None:
         proc.terminate()
+        # A stopped (SIGSTOP, a debugger let go) node only acts on SIGTERM once it runs again.
+        proc.send_signal(signal.SIGCONT)
         try:
             proc.wait(timeout_s)
         except subprocess.TimeoutExpired:
@@ -62,9 +65,8 @@ def _reap(proc: subprocess.Popen, timeout_s: float) -> int:
 class NodeProcess:
     """Start ``sim_node`` in lockstep mode in a child process; ``stop()`` or GC reaps it.
 
-    The child runs through ``growspace_gym_bridge.launcher``, which asks Linux to SIGTERM it if
-    the thread that started it dies, so a crashed trainer leaves no chamber behind. Create it
-    from a long-lived thread (a main thread, a vector-env worker).
+    The child runs through ``growspace_gym_bridge.launcher``: it stops by itself once this
+    process is gone, however it ended, so a crashed or killed trainer leaves no chamber behind.
 
     Args:
         namespace: ROS namespace of the chamber, e.g. ``/growspace_bridge_1``.

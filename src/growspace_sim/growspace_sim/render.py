@@ -56,7 +56,7 @@ class Renderer:
         self._target.fill(0)
         if chamber.target_mask is not None:
             self._target[chamber.target_mask] = INTENSITY[TARGET]
-        else:
+        elif chamber.target is not None:  # a task may have no target at all (Layout)
             radius = chamber.cfg.width_m(chamber.cfg.target_radius)
             cv2.circle(self._target, self._fixed_point(chamber.target), self._fixed(radius),
                        INTENSITY[TARGET], -1, cv2.LINE_8, _SHIFT)

@@ -98,7 +98,9 @@ def apply_continuous(light: Light, action: np.ndarray, cfg: SimConfig) -> None:
     size = continuous_size(light)
     values = np.asarray(action, dtype=np.float64).reshape(-1)
     if values.size != size:
-        raise CommandError('continuous', values.tolist(), f'{size} values in [-1, 1]')
+        # A huge vector is quoted as numpy summarises it, not as a list of every value.
+        raise CommandError('continuous', values.tolist() if values.size <= 16 else values,
+                           f'{size} values in [-1, 1], not {values.size}')
     finite = np.isfinite(values)
     bad = ~finite | (np.abs(np.where(finite, values, 0.0)) > 1.0)  # no NaN comparison warnings
     if bad.any():

@@ -7,6 +7,9 @@ Entry points::
 
     growspace-train --algo ppo --env GrowSpace/Control-Easy-v0 --steps 100000 --seed 0
     growspace-compare --run runs/ppo-control-easy-s0 --episodes 50 --out results/
+
+Policy files (a run's ``model.zip``, checkpoints) are pickles: loading one runs code it
+contains. Load only files you made.
 """
 
 from __future__ import annotations

@@ -12,6 +12,10 @@ A run trained on the MNIST curriculum is evaluated on all ten digits
 (``GrowSpace/Shape-AllDigits-v0``), like the run trained on random digits. Usage::
 
     growspace-compare --run runs/ppo-control-easy-s0 --run runs/ppo-control-easy-s1 --out results
+
+Security: a run's ``model.zip`` is a pickle. Stable-Baselines3 restores parts of it with
+cloudpickle, so loading one runs code it contains: pass ``--run`` only directories you made
+(``growspace-train``), or ones you would run as code.
 """
 
 from __future__ import annotations
@@ -286,7 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--run', action='append', required=True,
-                        help='a run directory from growspace-train (repeatable)')
+                        help='a run directory from growspace-train (repeatable); its '
+                             'model.zip is a pickle that runs code when loaded: only your own')
     parser.add_argument('--episodes', type=int, default=50, help='episodes per agent and run')
     parser.add_argument('--seed', type=int, default=10_000, help='first episode seed')
     parser.add_argument('--out', default='results')

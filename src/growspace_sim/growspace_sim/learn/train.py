@@ -227,7 +227,11 @@ def train(algo: str, env_id: str, steps: int, seed: int = 0, out: str | os.PathL
 
 
 def load_model(path: str | os.PathLike, device: str = 'cpu') -> BaseAlgorithm:
-    """Load a run directory's ``model.zip`` or any checkpoint zip, finding its algo in run.json."""
+    """Load a run directory's ``model.zip`` or any checkpoint zip, finding its algo in run.json.
+
+    The file is a pickle: Stable-Baselines3 restores parts of it with cloudpickle, so loading
+    runs code it contains. Load only files you made, or that you would run as code.
+    """
     path = Path(path)
     zip_path = path / 'model.zip' if path.is_dir() else path
     for parent in (zip_path.parent, zip_path.parent.parent):

@@ -336,11 +336,16 @@ class ChamberNode:
             n = self.cfg.plant_count
             outcome = StepOutcome(0.0, np.zeros(n), False, truncated or self.episode_over, 0)
         elif not math.isfinite(outcome.reward) or not np.isfinite(outcome.plant_rewards).all():
-            self.log.warn('result:reward', f'step_result: non-finite reward {outcome.reward!r} '
-                          f'replaced by 0.0 (never published as NaN).')
-            outcome = dataclasses.replace(
-                outcome, reward=0.0, plant_rewards=np.nan_to_num(outcome.plant_rewards, nan=0.0,
-                                                                 posinf=0.0, neginf=0.0))
+            # A broken task must not stop the chamber nor put NaN on the wire: the episode ends
+            # here, the reason goes to the client in info, and rewards go out as 0.0.
+            reason = (f'error: the {self.cfg.challenge} reward is not finite (reward '
+                      f'{outcome.reward!r}, plant rewards {outcome.plant_rewards.tolist()}); '
+                      f'the episode ends here with reward 0.0; send a reset.')
+            self.log.warn('result:reward', f'step_result: {reason}')
+            outcome = outcome._replace(reward=0.0, truncated=True, plant_rewards=np.nan_to_num(
+                outcome.plant_rewards, nan=0.0, posinf=0.0, neginf=0.0))
+            self.episode_over = True
+            info = f'{info}; {reason}' if info else reason
         self._publish('result', convert.step_result_msg(
             outcome, step_id=step_id, reset_id=reset_id, step=self.sim.chamber.steps,
             stamp_ns=self.sim_time_ns, frame_id=self.params.frame_id, info=info))

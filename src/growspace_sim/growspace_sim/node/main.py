@@ -1,21 +1,30 @@
 """``sim_node`` entry point: the chamber node on rclpy (the Jazzy ``talker.py`` pattern).
 
 Exit codes: 0 after SIGINT or SIGTERM, whenever it comes (the recording is finished first);
-2 for an invalid parameter (one line on stderr naming it, its value and what is allowed).
+2 for an invalid parameter (one line on stderr naming it, its value and what is allowed) or a
+ROS command line rcl cannot parse (a missing or broken params file, a bad ``-p`` or ``-r``).
 Unknown parameters (a typo in ``-p`` or a params file) are reported and ignored, as ROS does for
 undeclared ones, but never silently.
 
-Signals: rclpy's handlers shut the context down, which ends the spin loop between two
-callbacks, so a lockstep step is never cut between its state change and its StepResult. Ours,
-installed first, only set a flag (so nothing raises KeyboardInterrupt): a signal that comes
-before rclpy is up (imports, start-up) ends the node as soon as it would start spinning.
+Signals: ours only set a flag (so nothing raises KeyboardInterrupt), which ends the spin loop
+between two callbacks, so a lockstep step is never cut between its state change and its
+StepResult; a signal that comes before rclpy is up (imports, start-up) ends the node as soon as
+it would start spinning. rclpy's own handlers are not installed: they would shut the context
+down from their thread while a timer callback still publishes ("publisher's context is
+invalid"). Closing then runs in order (the node's recording, the executor, the node, the
+context) and is bounded: a second SIGINT or SIGTERM ends the process at once, and if closing
+takes longer than ``CLOSE_TIMEOUT_S`` (a hang in native code, where no Python signal handler
+runs), faulthandler writes every thread's stack to stderr and exits with status 1.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+import contextlib
+import faulthandler
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -26,6 +35,7 @@ from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.params import ParamError
 
 EXIT_BAD_PARAM = 2
+CLOSE_TIMEOUT_S = 10.0  # closing longer than this is a hang: stacks to stderr, exit 1 [s]
 
 log = logging.getLogger('growspace_sim.sim_node')
 
@@ -55,6 +65,26 @@ def installed_executable() -> str:
     return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim', 'sim_node')
 
 
+def ros_arguments_error(argv: Sequence[str]) -> str | None:
+    """Why rcl cannot parse a ROS command line, in one line; None if it can.
+
+    rcl parses it (params files included) exactly as ``rclpy.init`` would, but without a
+    context, so nothing is started and rcl logs nothing.
+
+    Args:
+        argv: the whole command line, executable first.
+    """
+    from rclpy.utilities import remove_ros_args
+
+    try:
+        remove_ros_args(list(argv))
+    except RuntimeError as e:  # rclpy's RCLInvalidROSArgsError and UnknownROSArgsError
+        text = re.sub(r', at \S+:\d+', '', str(e))  # rcl's source locations mean nothing here
+        text = text.removeprefix('Failed to parse ROS arguments: ')
+        return ' '.join(text.split())
+    return None
+
+
 class Closeable(Protocol):
     def close(self) -> None: ...
 
@@ -79,15 +109,20 @@ def run_node(executable: str, node_name: str, argv: Sequence[str], stop: threadi
         automatic_overrides: Declare every ``-p``/params-file value (see ``RclpyTransport``).
 
     Returns:
-        The exit status: 0 after a signal, 2 for an invalid parameter.
+        The exit status: 0 after a signal, 2 for an invalid parameter or command line.
     """
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
+    error = ros_arguments_error([executable, *argv])
+    if error is not None:
+        print(f'{executable}: invalid ROS arguments: {error}', file=sys.stderr)
+        return EXIT_BAD_PARAM
     transport: RclpyTransport | None = None
     node: Closeable | None = None
     try:
         transport = RclpyTransport(node_name, args=[executable, *argv],
-                                   automatic_overrides=automatic_overrides)
+                                   automatic_overrides=automatic_overrides,
+                                   signal_handlers=False)
         try:
             node = start(transport)
         except bad_input as e:
@@ -99,11 +134,31 @@ def run_node(executable: str, node_name: str, argv: Sequence[str], stop: threadi
             raise
         log.debug('%s stopped during start-up: %s', executable, e)
     finally:
-        if node is not None:
-            node.close()
-        if transport is not None:
-            transport.close()
+        with _closing_watchdog():
+            if node is not None:
+                node.close()
+            if transport is not None:
+                transport.close()
     return 0
+
+
+@contextlib.contextmanager
+def _closing_watchdog(timeout_s: float | None = None) -> Iterator[None]:
+    """Exit with status 1, every thread's stack on stderr, if the block runs over ``timeout_s``
+    (``CLOSE_TIMEOUT_S``). faulthandler's watchdog is a C thread that needs no GIL, so it also
+    ends a hang inside native code (rclpy, the middleware)."""
+    stderr = sys.__stderr__
+    try:
+        fileno = stderr.fileno() if stderr is not None else None
+    except (OSError, ValueError):  # no file descriptor (an embedding application)
+        fileno = None
+    if fileno is not None:
+        faulthandler.dump_traceback_later(timeout_s or CLOSE_TIMEOUT_S, exit=True, file=stderr)
+    try:
+        yield
+    finally:
+        if fileno is not None:
+            faulthandler.cancel_dump_traceback_later()
 
 
 def console_main(run: Callable[[list[str], threading.Event], int],
@@ -112,8 +167,14 @@ def console_main(run: Callable[[list[str], threading.Event], int],
     """A console script's ``main``: signals only set the stop flag (see the module docstring),
     log lines go to stderr, and ``stopped_line`` is logged to ``logger`` after a signal."""
     stop = threading.Event()
+
+    def on_signal(*_: Any) -> None:
+        stop.set()
+        # The next one ends the process at once, even while closing hangs in native code.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_DFL)
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, on_signal)
     logging.basicConfig(level=logging.INFO, format='[%(levelname)s] [%(name)s]: %(message)s')
     code = run(sys.argv[1:] if argv is None else list(argv), stop)
     if stop.is_set() and stopped_line:

@@ -30,6 +30,7 @@ from growspace_sim.ros import qos as ros_qos, types
 
 PUBLICATION_MODE_VAR = 'RMW_FASTRTPS_PUBLICATION_MODE'  # read when a publisher is created
 SPIN_S = 0.1  # longest wait in ``spin`` before the stop condition is checked again [s]
+EXECUTOR_STOP_S = 2.0  # how long ``close`` waits for a spinning executor to stop [s]
 ROS_PARAMETERS = frozenset({'use_sim_time', 'start_type_description_service'})  # every node's
 
 
@@ -113,17 +114,21 @@ class RclpyTransport:
         node_name: default node name (``-r __node:=`` in ``args`` overrides it, as usual).
         namespace: default namespace (``-r __ns:=`` overrides it).
         args: a ROS command line for this node (``--ros-args -p ... -r ...``); with it the
-            transport initialises the default context, as a ROS executable does, and rclpy's
-            SIGINT/SIGTERM handlers are installed. Without it the transport runs in a private
-            context and leaves signals alone (a library client: bridge, recorder, teleop).
+            transport initialises the default context, as a ROS executable does. Without it
+            the transport runs in a private context and leaves signals alone (a library
+            client: bridge, recorder, replay).
         domain_id: ROS domain of a private context; ROS_DOMAIN_ID when None.
         automatic_overrides: declare every ``-p``/params-file value, so ``declare_parameters``
             can tell which ones are unknown.
+        signal_handlers: with ``args``, install rclpy's SIGINT/SIGTERM handlers, which shut
+            the context down from their own thread at once, even while a callback runs (teleop
+            relies on them). False leaves signals to the application (the nodes' run loop):
+            the context then lives until ``close``, after the executor and the node.
     """
 
     def __init__(self, node_name: str, namespace: str | None = None,
                  args: Sequence[str] | None = None, *, domain_id: int | None = None,
-                 automatic_overrides: bool = False) -> None:
+                 automatic_overrides: bool = False, signal_handlers: bool = True) -> None:
         # A lockstep step is a chain of small writes: publishing in the caller's thread saves a
         # hand-over per message (1,300 -> 1,900 round trips/s, scripts/bench_node.py).
         os.environ.setdefault(PUBLICATION_MODE_VAR, 'SYNCHRONOUS')
@@ -138,7 +143,8 @@ class RclpyTransport:
                        signal_handler_options=SignalHandlerOptions.NO)
         else:
             self.context = rclpy.get_default_context()
-            rclpy.init(args=list(args), context=self.context)
+            rclpy.init(args=list(args), context=self.context, signal_handler_options=(
+                SignalHandlerOptions.ALL if signal_handlers else SignalHandlerOptions.NO))
         try:
             kwargs = {'namespace': namespace} if namespace else {}
             self.node = Node(node_name, context=self.context,
@@ -257,11 +263,24 @@ class RclpyTransport:
             pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9)))
 
     def close(self) -> None:
+        """Stop the executor, destroy the node, then shut the context down. Idempotent.
+
+        In that order: no callback (a timer's publish) runs once the context is shut down,
+        and the node's entities are destroyed while nothing dispatches them. The
+        ``EventsExecutor`` holds a use of every subscription and service it dispatches (its
+        handles stay "in use" for ``destroy_when_not_in_use``) until its ``shutdown`` returns.
+
+        Raises:
+            RuntimeError: the executor did not stop within ``EXECUTOR_STOP_S`` (another thread
+                still spins it); the node is left alone then, the context is shut down.
+        """
         if self._closed:
             return
         self._closed = True
         try:
-            self.executor.shutdown(timeout_sec=1.0)
+            if self.executor.shutdown(timeout_sec=EXECUTOR_STOP_S) is False:
+                raise RuntimeError(f'{self.node.get_fully_qualified_name()}: the executor did '
+                                   f'not stop within {EXECUTOR_STOP_S} s; node not destroyed.')
             self.node.destroy_node()
         finally:
             self.context.try_shutdown()

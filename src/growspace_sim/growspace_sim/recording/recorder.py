@@ -69,6 +69,9 @@ class McapRecorder:
         except OSError as e:
             raise RecordingError(io_error_text(f'Cannot create recording {self.path}', e,
                                                self.path)) from e
+        stat = os.fstat(self._stream.fileno())
+        # The file this recorder created (None: it replaced one it was asked to overwrite).
+        self._created = None if overwrite else (stat.st_dev, stat.st_ino)
         self._writer = ChunkedWriter(self._stream, chunk_size)
         try:
             self._writer.start(profile=PROFILE, library=LIBRARY)
@@ -252,6 +255,19 @@ class McapRecorder:
             writer.abandon()
         with contextlib.suppress(OSError, ValueError):
             self._stream.close()
+        self._remove_if_nothing_written()
+
+    def _remove_if_nothing_written(self) -> None:
+        """Remove the file if this recorder created it and not one byte of it reached the disk
+        (full at start-up): an empty file is no recording, and left behind it would make the
+        next start refuse the path as existing. Any other file is kept, whatever its size."""
+        created = getattr(self, '_created', None)
+        if created is None:
+            return
+        with contextlib.suppress(OSError):
+            stat = os.stat(self.path)
+            if (stat.st_dev, stat.st_ino) == created and stat.st_size == 0:
+                os.unlink(self.path)
 
 
 _RECOVER_HINT = ('. Messages in complete chunks are kept: '

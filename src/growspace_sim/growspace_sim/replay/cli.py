@@ -12,7 +12,7 @@ from growspace_sim import recording
 from growspace_sim.replay.bag import ReplayError
 from growspace_sim.replay.compare import compare, format_comparison
 from growspace_sim.replay.episodes import format_summary, summary
-from growspace_sim.replay.export import export_episode
+from growspace_sim.replay.export import export_episode, FPS_RANGE, SCALE_RANGE
 from growspace_sim.replay.play import play, play_steps
 from growspace_sim.replay.resim import resimulate
 
@@ -36,10 +36,15 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.add_argument('--view', action='store_true',
                           help='write OUT.mcap: every message, plus plant/markers and '
                                'camera/image_view after each step_result (as view_node)')
-    p_export.add_argument('--view-size', type=int, default=512, help='view image width [px]')
+    p_export.add_argument('--view-size', type=int, default=512,
+                          help='view image width [px], 16..4096 (default 512)')
     p_export.add_argument('--episode', type=int, default=0, help='0-based; -1 = last')
-    p_export.add_argument('--fps', type=float, help='default: the recorded rate')
-    p_export.add_argument('--scale', type=int, default=4)
+    p_export.add_argument('--fps', type=float,
+                          help=f'frames per second, {FPS_RANGE[0]}..{FPS_RANGE[1]} '
+                               f'(default: the recorded rate, brought into that range)')
+    p_export.add_argument('--scale', type=int, default=4,
+                          help=f'upscaling of each frame, {SCALE_RANGE[0]}..{SCALE_RANGE[1]} '
+                               f'(default 4)')
     p_export.add_argument('--namespace')
     p_export.add_argument('--overwrite', action='store_true')
     p_play = sub.add_parser('play', help='republish on the topics over ROS 2; with '

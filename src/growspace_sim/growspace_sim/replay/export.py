@@ -15,6 +15,10 @@ from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import read_episodes
 from growspace_sim.ros import convert
 
+# GIF stores a frame's delay in hundredths of a second (16 bits): 100 fps is its finest step.
+FPS_RANGE = (0.1, 100.0)  # frames per second
+SCALE_RANGE = (1, 16)  # upscaling factor: an 84 px frame becomes at most 1,344 px wide
+
 
 def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: int = 0,
                    fps: float | None = None, scale: int = 4, namespace: str | None = None,
@@ -26,8 +30,10 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         path: The recording.
         out: ``.gif`` (Pillow) or ``.mp4`` (OpenCV's bundled FFmpeg, codec mp4v).
         episode: 0-based episode index (negative counts from the end).
-        fps: Frames per second; None = the recorded rate (default 10).
-        scale: Integer upscaling (nearest neighbour) so 84 px frames are visible.
+        fps: Frames per second in ``FPS_RANGE``; None = the recorded rate (default 10),
+            brought into that range with a warning.
+        scale: Integer upscaling (nearest neighbour) so 84 px frames are visible, in
+            ``SCALE_RANGE``.
         namespace: The chamber namespace; None = the only one.
         progress: Show a progress bar on stderr.
         overwrite: Replace ``out`` if it exists.
@@ -39,7 +45,7 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
 
     Raises:
         ReplayError: Unreadable recording, no such episode, an existing output, an unknown
-            extension, or no MP4 encoder.
+            extension, ``fps`` or ``scale`` out of range, or no MP4 encoder.
     """
     out = Path(out)
     suffix = out.suffix.lower()
@@ -47,8 +53,13 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         raise ReplayError(f'Cannot export to {out}: use a .gif or .mp4 file name.')
     if out.exists() and not overwrite:
         raise ReplayError(f'{out} exists already, not overwriting.')
-    if scale < 1:
-        raise ReplayError(f'scale must be >= 1, got {scale}.')
+    if fps is not None and not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise ReplayError(f'fps = {fps!r} is not allowed; expected frames per second in '
+                          f'[{FPS_RANGE[0]}, {FPS_RANGE[1]}].')
+    if isinstance(scale, bool) or not isinstance(scale, int) or \
+            not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+        raise ReplayError(f'scale = {scale!r} is not allowed; expected an integer in '
+                          f'[{SCALE_RANGE[0]}, {SCALE_RANGE[1]}].')
 
     def skipped(part: Damage) -> None:
         if warn is not None:
@@ -63,8 +74,12 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         if chosen.damaged and warn is not None:
             warn(f'episode {chosen.index} is incomplete ({"; ".join(chosen.damaged)}); '
                  f'exporting the frames that could be read.')
-        rate = float(bag.metadata.get(METADATA_NAME, {}).get('rate_hz') or 10.0)
-        fps = fps or rate
+        if fps is None:
+            rate = float(bag.metadata.get(METADATA_NAME, {}).get('rate_hz') or 10.0)
+            fps = min(max(rate, FPS_RANGE[0]), FPS_RANGE[1])
+            if fps != rate and warn is not None:  # e.g. a real plant on the gantry, 1 step/h
+                warn(f'the recorded rate of {rate:g} Hz is outside [{FPS_RANGE[0]}, '
+                     f'{FPS_RANGE[1]}] frames per second; exporting at {fps:g}.')
         frames = []
         for record in chosen.steps:
             image = record.outputs.get('camera/image_raw')

@@ -1,10 +1,11 @@
 """The network rule: ROS processes we start talk only on this host unless the user chose otherwise.
 
-Two settings together, each applied only where the user set nothing (either one alone was
-measured to send no packet to a LAN interface beside loopback, so together they are belt and
-braces):
+Two settings together, each applied only where the user set nothing:
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (rcl, Jazzy) and a Fast DDS profile
 (``FASTRTPS_DEFAULT_PROFILES_FILE``) whose only transports are UDP on 127.0.0.1 and shared memory.
+Either alone was measured to send no packet to a LAN interface beside loopback; the profile
+also keeps the receiving ports on 127.0.0.1 (with ``LOCALHOST`` alone they listen on every
+interface). README "Networks" has the figures (``scripts/check_loopback.py``).
 Both are read when the first ROS context of a process starts, so call ``confine`` before
 ``rclpy.init`` and pass ``confined_env`` to child processes.
 """

@@ -260,8 +260,14 @@ def from_plain(typename: str, value: dict[str, Any]) -> Any:
     Raises:
         KeyError: The type is unknown.
         TypeError: A field name does not exist in the type.
-        ValueError: A fixed-size array has the wrong length.
+        ValueError: A value does not fit its field (``plain.check``: names the field, the
+            value and what is allowed) or a fixed-size array has the wrong length.
     """
+    from growspace_sim.ros import plain  # it reads this module's typestore
+
+    if typename in typestore().fielddefs:
+        plain.check(typename, value)
+
     def build(desc: tuple, item: Any) -> Any:
         kind, arg = desc
         if kind == Nodetype.NAME and isinstance(item, dict):

@@ -37,8 +37,9 @@ Usage::
     growspace-sweep SPEC --address HEAD_IP:6379 --storage /shared/sweeps     # a Ray cluster
 
 Ray: a local instance bound to 127.0.0.1 (no dashboard, no usage stats, nothing sent beyond
-loopback; see ``connect``) unless ``--address`` or ``RAY_ADDRESS`` names a cluster. Run the
-same command again after an interruption: finished trials are kept, the others run
+loopback, its session folders in a folder only this user can enter; see ``connect``), stopped
+completely at the end of the sweep, unless ``--address`` or ``RAY_ADDRESS`` names a cluster.
+Run the same command again after an interruption: finished trials are kept, the others run
 (``--retry-errored`` also reruns failed ones).
 
 Modules: ``spec`` (the spec and its validation), ``trials`` (Ray Tune: running, resuming,
@@ -51,8 +52,9 @@ from growspace_sim.sweep.report import summarise, TRIAL_COLUMNS
 from growspace_sim.sweep.spec import (
     BASELINES, flags_spec, LEARNERS, load_spec, parse_spec, Spec, SpecError, Trial)
 from growspace_sim.sweep.trials import (
-    connect, LOCAL_ONLY_ENV, LOOPBACK, Outcome, run_sweep, run_trial)
+    connect, disconnect, LOCAL_ONLY_ENV, LOOPBACK, Outcome, private_temp_dir, run_sweep,
+    run_trial)
 
 __all__ = ['BASELINES', 'LEARNERS', 'LOCAL_ONLY_ENV', 'LOOPBACK', 'Outcome', 'Spec', 'SpecError',
-           'TRIAL_COLUMNS', 'Trial', 'connect', 'flags_spec', 'load_spec', 'main', 'parse_spec',
-           'run_sweep', 'run_trial', 'summarise']
+           'TRIAL_COLUMNS', 'Trial', 'connect', 'disconnect', 'flags_spec', 'load_spec', 'main',
+           'parse_spec', 'private_temp_dir', 'run_sweep', 'run_trial', 'summarise']

@@ -11,7 +11,7 @@ from pathlib import Path
 from growspace_sim.learn import evaluate_policies
 from growspace_sim.sweep.report import summarise
 from growspace_sim.sweep.spec import BASELINES, flags_spec, LEARNERS, load_spec, Spec, SpecError
-from growspace_sim.sweep.trials import connect, run_sweep
+from growspace_sim.sweep.trials import connect, disconnect, run_sweep
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,10 +60,14 @@ def main(argv: list[str] | None = None) -> int:
             parser.error('give a spec file, or --agents and --envs')
         out = Path(args.out or Path('runs') / 'sweeps' / spec.name)
         start = time.perf_counter()
-        connect(args.address, args.workers)
-        outcomes = run_sweep(spec, out, args.storage, args.workers, args.cpus_per_trial,
-                             args.gpus_per_trial, args.retry_errored, 0 if args.quiet else 1,
-                             not args.fresh_processes)
+        ray_context = connect(args.address, args.workers)
+        try:
+            outcomes = run_sweep(spec, out, args.storage, args.workers, args.cpus_per_trial,
+                                 args.gpus_per_trial, args.retry_errored,
+                                 0 if args.quiet else 1, not args.fresh_processes)
+        finally:
+            if ray_context is not None:  # ours: stop it now, agents and all
+                disconnect()
     except SpecError as error:
         parser.error(str(error))
     rows = summarise(outcomes, out, plots=not args.no_plots)

@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import socket
+import stat
 import sys
 import tempfile
 import time
@@ -107,13 +108,23 @@ def _tune_trial(config: dict, trials: dict[str, dict]) -> None:
         tune.report(metrics, checkpoint=tune.Checkpoint.from_directory(tmp))
 
 
-def connect(address: str | None, workers: int | None) -> None:
+def connect(address: str | None, workers: int | None) -> Any | None:
     """Connect to a Ray cluster, or start a local instance bound to 127.0.0.1.
+
+    A local instance keeps its session folders (logs, sockets) in ``private_temp_dir()``, not
+    in the shared ``/tmp/ray``. Call ``disconnect()`` when done: it stops a local instance
+    completely (Ray's agents included), where relying on the end of the process would leave
+    them behind if that end is a kill.
 
     Args:
         address: A cluster's address (``ray start --head`` prints it); ``None`` reads
             ``RAY_ADDRESS`` and, without it, starts a local instance with no dashboard.
         workers: CPUs of the local instance (default: all cores); unused for a cluster.
+
+    Returns:
+        The ``ray.init`` context of the Ray this call started or joined (a local instance's
+        session folder is ``context.address_info['session_dir']``); None if Ray was already
+        initialised in this process (then it is not this caller's to disconnect).
 
     Raises:
         RuntimeError: A local instance would not stay on loopback (``ray`` was imported
@@ -130,17 +141,40 @@ def connect(address: str | None, workers: int | None) -> None:
         os.environ['RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER'] = '0'
     import ray  # noqa: PLC0415
     if ray.is_initialized():
-        return
+        return None
     if address:
-        ray.init(address=address, log_to_driver=False)
-        return
+        return ray.init(address=address, log_to_driver=False)
     if ray.util.get_node_ip_address() != LOOPBACK:
         raise RuntimeError('ray was imported before growspace_sim.sweep.connect(), so a local '
                            'Ray would not stay on 127.0.0.1; set '
                            'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 before importing ray.')
     with _environ(LOCAL_ONLY_ENV):
-        ray.init(address='local', num_cpus=workers, include_dashboard=False,
-                 _node_ip_address=LOOPBACK, log_to_driver=False)
+        return ray.init(address='local', num_cpus=workers, include_dashboard=False,
+                        _node_ip_address=LOOPBACK, _temp_dir=private_temp_dir(),
+                        log_to_driver=False)
+
+
+def disconnect() -> None:
+    """Leave Ray: a local instance ``connect`` started stops, every process of it."""
+    import ray  # noqa: PLC0415
+    ray.shutdown()
+
+
+def private_temp_dir() -> str:
+    """Where a local Ray keeps its sessions: ``ray/`` in a folder only this user can enter.
+
+    Ray makes its temporary folder and every session folder in it world-writable (mode 0777,
+    so that the users of one machine can share ``/tmp/ray``). Inside a parent of mode 0700
+    nobody else can read their logs or put files among their sockets. A parent of that name
+    owned by someone else, or opened up to others, is not used: a fresh one is made instead.
+    """
+    parent = Path(tempfile.gettempdir()) / f'growspace-ray-{os.getuid()}'
+    with contextlib.suppress(FileExistsError):
+        parent.mkdir(mode=0o700)
+    info = parent.lstat()
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid() or info.st_mode & 0o077:
+        parent = Path(tempfile.mkdtemp(prefix='growspace-ray-'))
+    return str(parent / 'ray')
 
 
 @contextlib.contextmanager

@@ -7,8 +7,9 @@ Example (the same YAML value as the ``ros2`` command line)::
 
 Waits until a subscriber matched (up to ``--wait`` seconds), publishes once with the node's
 command QoS (reliable), and waits for the acknowledgement, so the message is not lost on exit.
-The value is checked against the type before anything starts: a misspelt field or a value of
-the wrong type is an error naming it (exit 2).
+The value is checked against the type before anything starts: a misspelt field, or a value of
+the wrong kind or out of its field's range (``step_id: -1``, ``x: abc``), is one line naming
+the field, the value and what is allowed (exit 2).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError(f'values must be a YAML mapping, got {args.values!r}')
         msg = types.from_plain(args.type, values)
     except (ValueError, TypeError, KeyError, yaml.YAMLError) as e:
-        print(f'pub: {e}', file=sys.stderr)
+        print(f'pub: {e.args[0] if isinstance(e, KeyError) else e}', file=sys.stderr)
         return 2
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
