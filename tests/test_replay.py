@@ -318,8 +318,8 @@ def test_export_brings_an_extreme_recorded_rate_into_range(tmp_path):
 
     path = tmp_path / 'slow.mcap'
     with McapRecorder(path) as rec:  # a real plant on the gantry: one step an hour
-        EpisodeRunner(SimConfig(episode_length=3), rec, rate_hz=1 / 3600).run_episode(
-            OracleAgent().act, 1)
+        play_episodes(EpisodeRunner(SimConfig(episode_length=3), rec, rate_hz=1 / 3600),
+                      OracleAgent(), [1])
     warnings: list[str] = []
     replay.export_episode(path, tmp_path / 's.gif', progress=False, warn=warnings.append)
     with Image.open(tmp_path / 's.gif') as gif:

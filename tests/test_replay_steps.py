@@ -85,8 +85,8 @@ def test_a_step_that_fails_on_the_node_stops_the_replay_with_its_reason(tmp_path
                                                                         keep_going):
     node = sim_node(tmp_path, '-p', 'episode_length:=10')  # steps 11.. are refused
     try:
-        code = main(['play', str(BAG), '--step-period', '0', '--wait', '20']
-                    + (['--keep-going'] if keep_going else []))
+        code = main(['play', str(BAG), '--step-period', '0', '--wait', '20',
+                     '--step-timeout', '60'] + (['--keep-going'] if keep_going else []))
     finally:
         node.stop(signal.SIGINT)
     out, err = capsys.readouterr()
@@ -119,3 +119,25 @@ def test_steps_the_recording_does_not_have_are_refused_before_anything_is_sent()
         play_steps(BAG, start_step=60)
     with pytest.raises(ReplayError, match='the recording has 1 episode'):
         play_steps(BAG, episode=1)
+
+
+def test_a_node_that_dies_mid_replay_stops_it_at_once(tmp_path):
+    # The gantry's process died: no step_result will come, however long the step may take.
+    import time
+
+    from growspace_sim.replay import play_steps
+
+    node = sim_node(tmp_path)
+    killed_at = []
+
+    def log(line: str) -> None:
+        if 'step 3/50' in line and not killed_at:  # the node is answering: now it dies
+            node.proc.kill()
+            killed_at.append(time.monotonic())
+    try:
+        report = play_steps(BAG, step_period_s=0.5, step_timeout_s=600.0, log=log,
+                            wait_for_subscribers_s=20.0)
+    finally:
+        node.stop()
+    assert killed_at and 'the node left' in report.stopped, report
+    assert time.monotonic() - killed_at[0] < 30  # NODE_GONE_S after the kill, not 600 s

@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from growspace_sim.core import task as tasks
+from growspace_sim.core.errors import echo
 from growspace_sim.core.schema import AT_RESET, Bounds, check, param
 from growspace_sim.core.task import SETTINGS, Task
 
@@ -94,7 +95,7 @@ class SimConfig:
         task = self.task
         if self.setting not in task.settings:
             raise ValueError(f'setting must be one of {task.settings} for {task.name}, '
-                             f'got {self.setting!r}.')
+                             f'got {echo(self.setting)}.')
         if self.max_branching * self.episode_length > MAX_NODES:
             raise ValueError(
                 f'max_branching x episode_length ({self.max_branching} x {self.episode_length}'

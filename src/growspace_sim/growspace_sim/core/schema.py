@@ -27,6 +27,8 @@ import math
 import re
 from typing import Any
 
+from growspace_sim.core.errors import echo
+
 # When a new value takes effect in a running node.
 AT_RESET = 'at the next reset'
 AT_ONCE = 'at once'
@@ -64,14 +66,14 @@ class Bounds:
         kind = int if self.integer else (int, float)
         if isinstance(value, bool) or not isinstance(value, kind):
             raise ValueError(f'{name} must be {"an int" if self.integer else "a number"}, '
-                             f'got {value!r}.')
+                             f'got {echo(value)}.')
         if self.sentinel is not None and value == self.sentinel:
             return
         if not math.isfinite(value) or value > self.high or value < self.low \
                 or (self.low_open and value == self.low):
             also = '' if self.sentinel is None else f' or {self.sentinel}'
             where = f'in {self}' if math.isfinite(self.high) else str(self)
-            raise ValueError(f'{name} must be {where}{also}, got {value!r}.')
+            raise ValueError(f'{name} must be {where}{also}, got {echo(value)}.')
 
 
 @dataclass(frozen=True)
@@ -140,17 +142,17 @@ class Param:
         if self.accept is not None:
             self.accept(value)
         elif self.allowed and value not in self.allowed:
-            raise ValueError(f'{name} must be one of {self.allowed}, got {value!r}.')
+            raise ValueError(f'{name} must be one of {self.allowed}, got {echo(value)}.')
         if self.pattern and (not isinstance(value, str)
                              or not re.fullmatch(self.pattern, value)):
-            raise ValueError(f'{name} must be {self.pattern_doc}, got {value!r}.')
+            raise ValueError(f'{name} must be {self.pattern_doc}, got {echo(value)}.')
         if self.bounds is not None:
             if isinstance(value, tuple):
                 for item in value:
                     try:
                         self.bounds.check(f'each of {name}', item)
                     except ValueError as e:
-                        raise ValueError(f'{str(e)[:-1]} in {value!r}.') from None
+                        raise ValueError(f'{str(e)[:-1]} in {echo(value)}.') from None
             else:
                 self.bounds.check(name, value)
 
@@ -191,7 +193,7 @@ def check(obj: Any) -> None:
             ok = isinstance(value, tuple) and all(
                 isinstance(v, int) and not isinstance(v, bool) for v in value)
         if not ok:
-            raise ValueError(f'{field.name} must be {_KIND_NAMES[expected]}, got {value!r}.')
+            raise ValueError(f'{field.name} must be {_KIND_NAMES[expected]}, got {echo(value)}.')
         declaration.check(field.name, value)
 
 
@@ -212,7 +214,7 @@ def coerce(default: Any, name: str, value: Any) -> Any:
         return tuple(value)
     if isinstance(value, expected) and not (expected is int and isinstance(value, bool)):
         return value
-    raise ValueError(f'{name} must be {_KIND_NAMES[expected]}, got {value!r}.')
+    raise ValueError(f'{name} must be {_KIND_NAMES[expected]}, got {echo(value)}.')
 
 
 def markdown_table(*classes: type) -> str:

@@ -22,6 +22,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from growspace_sim.core.errors import echo
+
 SETTINGS = ('easy', 'hard')
 
 Score = tuple[float, np.ndarray, bool]  # reward, (n_plants,) float64 per-plant reward, success
@@ -109,7 +111,7 @@ def get(name: str) -> Task:
     if isinstance(name, str) and ':' in name:
         return _load(name)
     raise ValueError(f'challenge must be one of {names()} or module:attribute naming a Task, '
-                     f'got {name!r}.')
+                     f'got {echo(name)}.')
 
 
 def _load(name: str) -> Task:

@@ -18,6 +18,7 @@ from growspace_sim.ros import types
 from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 
 WAITING_NOTE_S = 60.0  # while a step takes longer than this, say so this often [s]
+NODE_GONE_S = 5.0  # no publisher of step_result for this long: the node left [s]
 
 
 def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[str] | None = None,
@@ -186,12 +187,14 @@ def play_steps(path: str | os.PathLike, *, episode: int | None = None, start_ste
                 out.requests += 1
                 sent = time.monotonic()
                 next_at = sent + step_period_s
-                answer = _answer(transport, results, request, sent, step_timeout_s, say)
+                answer = _answer(transport, results, request, sent, step_timeout_s, say,
+                                 names[-1])
                 where = f'episode {ep.index}, {request.what}'
-                if answer is None:
-                    out.stopped = f'{where}: no step_result within {step_timeout_s:g} s'
+                if not isinstance(answer, Answer):
+                    out.stopped = f'{where}: {answer}'
                     say(out.stopped)
                     return out
+                answer = answer.result
                 took = time.monotonic() - sent
                 if not answer.info:
                     out.answered += 1
@@ -263,18 +266,31 @@ def _wait_until(transport: Any, at: float, what: str, say: Callable[[str], None]
         transport.spin_once(min(0.1, max(0.0, at - time.monotonic())))
 
 
+@dataclasses.dataclass(frozen=True)
+class Answer:
+    result: Any  # the step_result of a request
+
+
 def _answer(transport: Any, results: list[Any], request: _Request, sent: float,
-            timeout_s: float, say: Callable[[str], None]) -> Any:
-    """The node's step_result for ``request``, or None after ``timeout_s``."""
+            timeout_s: float, say: Callable[[str], None], result_topic: str) -> Answer | str:
+    """The node's step_result for ``request``, or why there is none: no answer after
+    ``timeout_s``, or the node gone (no one publishes ``result_topic`` any more for
+    ``NODE_GONE_S``: a node that died mid-step will not answer, however long we wait)."""
     note = sent + WAITING_NOTE_S
+    seen = sent
     while time.monotonic() - sent < timeout_s:
         for result in results:
             if int(result.step_id) == request.step_id and int(result.reset_id) == \
                     request.reset_id:
-                return result
-        if time.monotonic() > note:
+                return Answer(result)
+        now = time.monotonic()
+        if transport.matched(result_topic):
+            seen = now
+        elif now - seen > NODE_GONE_S:
+            return f'the node left ({result_topic} has no publisher for {NODE_GONE_S:g} s)'
+        if now > note:
             say(f'{request.what}: still waiting for its step_result '
-                f'({time.monotonic() - sent:.0f} s)')
+                f'({now - sent:.0f} s)')
             note += WAITING_NOTE_S
         transport.spin_once(0.05)
-    return None
+    return f'no step_result within {timeout_s:g} s'
