@@ -209,3 +209,23 @@ def test_a_task_whose_first_reward_is_nan_still_starts_the_node(misbehaving):
     (result, cdr), = transport.published['/step_result']  # the reset's answer
     assert result.truncated and 'reward is not finite' in result.info
     assert np.isfinite(_result_reward_on_the_wire(cdr)) and np.isfinite(result.plant_rewards).all()
+
+
+@pytest.mark.parametrize('vector', [False, True])
+def test_a_nan_reward_in_process_is_a_clear_error_not_a_quiet_nan(misbehaving, vector):
+    # In process the bug surfaces at once (training must not learn from NaN); the node, which
+    # must not stop, ends the episode instead (the test above).
+    register_envs()
+    if vector:
+        env = gym.make_vec(env_id('broken', 'easy'), num_envs=2)
+        action = np.array([2, 2])
+    else:
+        env = gym.make(env_id('broken', 'easy'))
+        action = 2
+    env.reset(seed=1)
+    env.step(action)
+    env.step(action)
+    with pytest.raises(ValueError, match=r'the broken task scored a non-finite reward .*nan.* '
+                                         r'at step 3: a bug in its score function'):
+        env.step(action)
+    env.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -111,6 +112,7 @@ class GrowSpaceEnv(gym.Env):
         else:
             self.sim.apply_discrete(as_action_index(action))
         outcome = self.sim.step()
+        check_rewards(outcome.reward, self.cfg, self.chamber.steps)
         return self._observe(), outcome.reward, False, outcome.truncated, self._info(outcome)
 
     def render(self) -> np.ndarray | None:
@@ -135,6 +137,20 @@ class GrowSpaceEnv(gym.Env):
         if self.sim.digit is not None:
             info['digit'] = self.sim.digit
         return info
+
+
+def check_rewards(rewards: Any, cfg: SimConfig, step: int) -> None:
+    """Refuse a non-finite reward: a bug in the task's score, which training must not learn
+    from quietly (the chamber node, which must not stop, ends such an episode instead and says
+    why in ``StepResult.info``).
+
+    Raises:
+        ValueError: naming the challenge, the reward and the step.
+    """
+    finite = math.isfinite(rewards) if isinstance(rewards, float) else np.isfinite(rewards).all()
+    if not finite:  # (math for one env's float: numpy's call costs ~1 us a step)
+        raise ValueError(f'the {cfg.challenge} task scored a non-finite reward ({rewards!r}) at '
+                         f'step {step}: a bug in its score function.')
 
 
 def check_env_args(observation: str, render_mode: str | None) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 from growspace_sim import digits as digit_data
 from growspace_sim.core.chamber import Chamber, StepOutcome
 from growspace_sim.core.config import SimConfig
-from growspace_sim.envs.env import check_env_args, spaces_for
+from growspace_sim.envs.env import check_env_args, check_rewards, spaces_for
 from growspace_sim.simulation import Simulation
 
 LIGHT_KEYS = ('x', 'z', 'width', 'radius')
@@ -186,6 +186,7 @@ class GrowSpaceVectorEnv(gym.vector.VectorEnv):
                 sim.apply_discrete(values[i])
                 outcomes[i] = sim.step()
         rewards = np.array([0.0 if reset else o.reward for reset, o in zip(autoreset, outcomes)])
+        check_rewards(rewards, self.cfg, max(c.steps for c in self._chambers))
         truncations = np.array([not reset and o.truncated
                                 for reset, o in zip(autoreset, outcomes)])
         final: dict[str, Any] = {}
