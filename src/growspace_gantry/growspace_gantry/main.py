@@ -10,6 +10,7 @@ unplug: the node runs and says so on ``gantry/status``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+import dataclasses
 import logging
 import os
 import sys
@@ -24,7 +25,7 @@ from growspace_gantry.settings import GantryParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.main import console_main, make_recorder, run_node
-from growspace_sim.node.params import ParamError
+from growspace_sim.node.params import NodeParams, ParamError
 
 NODE_NAME = 'growspace_gantry'
 
@@ -48,9 +49,16 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         # Read at start-up only (read-only parameters): a rig is reconfigured by restart.
         specs = params.specs_of(SimConfig, GantryParams, runtime=False)
         values, unknown = transport.declare_parameters(specs, params.check_type)
-        if unknown:
+        # The simulator's params file works here too: its node-only settings mean nothing to
+        # a gantry, which says so once; anything else is a typo until proven otherwise.
+        sim_only = sorted(set(unknown) & {f.name for f in dataclasses.fields(NodeParams)})
+        typos = sorted(set(unknown) - set(sim_only))
+        if sim_only:
+            transport.logger.info(f'gantry_node: sim_node parameter(s) {sim_only} do not '
+                                  f'apply to a gantry; ignored.')
+        if typos:
             transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '
-                                  f'{unknown}: not parameters of gantry_node (a typo?)')
+                                  f'{typos}: not parameters of gantry_node (a typo?)')
         cfg, settings = params.build(values, GantryParams)
         cal = calibration.load(settings.calibration or default_calibration())
         recorder = make_recorder(settings.record_path)

@@ -23,10 +23,9 @@ from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.local import LocalTransport
 from growspace_sim.node.params import DEFAULT_NODE_NAME, NodeParams
-from growspace_sim.ros import convert
-from growspace_sim.ros import types
+from growspace_sim.ros import convert, types
+from growspace_sim.ros.names import DEFAULT_NAMESPACE
 
-DEFAULT_NAMESPACE = '/growspace'
 
 
 class EpisodeRunner:

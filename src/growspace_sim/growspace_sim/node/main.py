@@ -1,8 +1,11 @@
 """``sim_node`` entry point: the chamber node on rclpy (the Jazzy ``talker.py`` pattern).
 
-Exit codes: 0 after SIGINT or SIGTERM, whenever it comes (the recording is finished first);
-2 for an invalid parameter (one line on stderr naming it, its value and what is allowed) or a
-ROS command line rcl cannot parse (a missing or broken params file, a bad ``-p`` or ``-r``).
+Exit codes: 0 after SIGINT or SIGTERM, whenever it comes (the recording is finished first),
+and for ``--help``; 2 for an invalid parameter (one line on stderr naming it, its value and what
+is allowed), a ROS command line rcl cannot parse (a missing or broken params file, a bad ``-p``
+or ``-r``) or an argument that is not a ROS one (``-p x:=1`` without ``--ros-args``, which rclpy
+would leave to a program that ignores it). Every node runs in ``/growspace`` unless
+``-r __ns:=`` says otherwise.
 Unknown parameters (a typo in ``-p`` or a params file) are reported and ignored, as ROS does for
 undeclared ones, but never silently.
 
@@ -33,8 +36,13 @@ from typing import Any, Protocol
 from growspace_sim.node import params
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.params import ParamError
+from growspace_sim.ros.names import DEFAULT_NAMESPACE
 
 EXIT_BAD_PARAM = 2
+USAGE = """usage: {executable} [--ros-args [-p NAME:=VALUE] [--params-file FILE] [-r __ns:=/NS]]
+
+Runs in the namespace {namespace} unless -r __ns:= says otherwise. Its parameters, their units,
+ranges and when a change applies: the README, or `ros2 param describe` on the running node."""
 CLOSE_TIMEOUT_S = 10.0  # closing longer than this is a hang: stacks to stderr, exit 1 [s]
 
 log = logging.getLogger('growspace_sim.sim_node')
@@ -85,6 +93,14 @@ def ros_arguments_error(argv: Sequence[str]) -> str | None:
     return None
 
 
+def own_arguments(argv: Sequence[str]) -> list[str]:
+    """What rclpy leaves of a command line (executable first): arguments not after --ros-args,
+    such as ``-p x:=1`` typed without it, which a node would otherwise ignore in silence."""
+    from rclpy.utilities import remove_ros_args
+
+    return remove_ros_args(list(argv))[1:]
+
+
 class Closeable(Protocol):
     def close(self) -> None: ...
 
@@ -117,10 +133,20 @@ def run_node(executable: str, node_name: str, argv: Sequence[str], stop: threadi
     if error is not None:
         print(f'{executable}: invalid ROS arguments: {error}', file=sys.stderr)
         return EXIT_BAD_PARAM
+    own = own_arguments([executable, *argv])
+    if own in (['-h'], ['--help']):
+        print(USAGE.format(executable=executable, namespace=DEFAULT_NAMESPACE))
+        return 0
+    if own:
+        print(f'{executable}: unexpected argument(s) {" ".join(own)!r}: {executable} takes ROS '
+              f'arguments only, after --ros-args; did you mean '
+              f'`{executable} --ros-args {" ".join(own)}`? ({executable} --help)',
+              file=sys.stderr)
+        return EXIT_BAD_PARAM
     transport: RclpyTransport | None = None
     node: Closeable | None = None
     try:
-        transport = RclpyTransport(node_name, args=[executable, *argv],
+        transport = RclpyTransport(node_name, DEFAULT_NAMESPACE, args=[executable, *argv],
                                    automatic_overrides=automatic_overrides,
                                    signal_handlers=False)
         try:

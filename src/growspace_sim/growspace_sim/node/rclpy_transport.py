@@ -27,6 +27,7 @@ from growspace_sim.node.params import ParamSpec
 from growspace_sim.node.transport import (
     MessageCallback, PublishFn, ServiceHandler, ThrottledLogger, guarded)
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros.interface import NAMES
 
 PUBLICATION_MODE_VAR = 'RMW_FASTRTPS_PUBLICATION_MODE'  # read when a publisher is created
 SPIN_S = 0.1  # longest wait in ``spin`` before the stop condition is checked again [s]
@@ -203,6 +204,15 @@ class RclpyTransport:
     def has_subscribers(self, topic: str) -> bool:
         pub = self._publishers.get(self.resolve(topic))
         return pub is not None and pub.get_subscription_count() > 0
+
+    def chamber_namespaces(self) -> list[str]:
+        """The namespaces where the ROS graph shows a chamber now: a publisher of its
+        ``chamber/config`` (a reader of that topic, a view or teleop, is no chamber)."""
+        suffix = '/' + NAMES['config']
+        return sorted(name[:-len(suffix)] or '/'
+                      for name, kinds in self.node.get_topic_names_and_types()
+                      if name.endswith(suffix) and types.STRING in kinds
+                      and self.node.count_publishers(name) > 0)
 
     def matched(self, topic: str) -> bool:
         endpoint = self._publishers.get(self.resolve(topic))

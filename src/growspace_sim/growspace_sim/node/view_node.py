@@ -29,6 +29,7 @@ from typing import Any
 from growspace_sim.core.schema import Bounds, param
 from growspace_sim.node import params
 from growspace_sim.node.main import console_main, run_node
+from growspace_sim.node.presence import ChamberWatch
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert, qos as ros_qos, types
 from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
@@ -74,6 +75,7 @@ class ViewNode:
         self.scene = Scene()
         self.renderer = ViewRenderer(view_size)
         self.frames = 0  # frames built (for tests and the log)
+        self.configs = 0  # chamber/config messages received (the chamber showed itself)
         self._note = None
         self._publish_markers = transport.publisher(markers.MARKER_ARRAY, MARKERS_TOPIC,
                                                     OBSERVATION_QOS)
@@ -94,7 +96,7 @@ class ViewNode:
                       transport.resolve('reset'): types.RESET_REQUEST}
             services = {transport.resolve('reset'): (types.RESET, self.reset_service)}
             self.fox = foxglove(outputs, inputs, self.on_client_message, services=services)
-        handlers = {'config': lambda msg: self.scene.on_config(msg.data),
+        handlers = {'config': self._on_config,
                     'plant': self.scene.on_plant, 'light': self.scene.on_light,
                     'result': self._on_result,
                     'image': lambda msg: None}
@@ -111,6 +113,10 @@ class ViewNode:
             except ViewInputError as e:
                 self.log.warn(f'input:{e.topic}:{e.field}', str(e))
         return receive
+
+    def _on_config(self, msg: Any) -> None:
+        self.configs += 1
+        self.scene.on_config(msg.data)
 
     def _on_result(self, msg: Any) -> None:
         with self._reset_done:
@@ -220,6 +226,14 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         warm_up()
         view = ViewNode(transport, settings.view_size,
                         foxglove_factory(settings) if settings.foxglove_port else None)
+        watch = ChamberWatch(transport, 'view_node', lambda text: transport.logger.warn(
+            'no-chamber', text))
+
+        def look() -> None:
+            if view.configs:
+                watch.seen()
+            watch.check()
+        transport.create_timer(1.0, look)
         where = '' if view.fox is None else \
             f', Foxglove on ws://{view.fox.host}:{view.fox.port}'
         transport.logger.info(f'view_node {transport.resolve("~")}: {settings.view_size} px'

@@ -10,6 +10,10 @@ from __future__ import annotations
 import re
 
 MAX_NODE_NAME_LENGTH = 255  # RMW_NODE_NAME_MAX_NAME_LENGTH
+# The chamber's namespace unless ``-r __ns:=`` (or a program's option) says otherwise: every
+# program we ship (sim_node, gantry_node, camera_node, view_node, teleop, growspace-record,
+# tools.pub) and the launch file meet there, so following the README they find each other.
+DEFAULT_NAMESPACE = '/growspace'
 
 _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 _SUBSTITUTION = re.compile(r'\{([^{}]*)\}')

@@ -2,7 +2,7 @@
 
 Example (the same YAML value as the ``ros2`` command line)::
 
-    python -m growspace_sim.tools.pub /light/command growspace_msgs/msg/LightCommand \\
+    python -m growspace_sim.tools.pub light/command growspace_msgs/msg/LightCommand \\
         "{mode: 0, x: 0.3, width: 0.1}"
 
 Waits until a subscriber matched (up to ``--wait`` seconds), publishes once with the node's
@@ -24,12 +24,14 @@ import yaml
 
 from growspace_sim.ros import types
 from growspace_sim.ros.interface import COMMAND_QOS
+from growspace_sim.ros.names import DEFAULT_NAMESPACE
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='python -m growspace_sim.tools.pub',
                                      description=__doc__.split('\n', 1)[0])
-    parser.add_argument('topic', help='topic name, e.g. /light/command or /chamber1/reset')
+    parser.add_argument('topic', help=f'topic name, relative to {DEFAULT_NAMESPACE} (e.g. '
+                        f'light/command) or absolute (e.g. /chamber1/reset)')
     parser.add_argument('type', help='message type, e.g. growspace_msgs/msg/LightCommand')
     parser.add_argument('values', nargs='?', default='{}', help='YAML mapping of field values')
     parser.add_argument('--wait', type=float, default=5.0, help='seconds to wait for a reader')
@@ -42,9 +44,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, TypeError, KeyError, yaml.YAMLError) as e:
         print(f'pub: {e.args[0] if isinstance(e, KeyError) else e}', file=sys.stderr)
         return 2
+    from growspace_sim.node.presence import where_chambers_are
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
-    transport = RclpyTransport(f'growspace_pub_{os.getpid()}')
+    transport = RclpyTransport(f'growspace_pub_{os.getpid()}', DEFAULT_NAMESPACE)
     try:
         publish = transport.publisher(args.type, args.topic, COMMAND_QOS)
         topic = transport.resolve(args.topic)
@@ -52,8 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         while not transport.matched(args.topic) and time.monotonic() < deadline:
             transport.spin_once(0.02)
         if not transport.matched(args.topic):
-            print(f'pub: no subscriber on {topic} after {args.wait} s; publishing anyway',
-                  file=sys.stderr)
+            print(f'pub: no subscriber on {topic} after {args.wait} s; publishing anyway; '
+                  f'{where_chambers_are(transport)}', file=sys.stderr)
         publish(msg)
         transport.flush(args.wait)
     finally:

@@ -26,8 +26,9 @@ from growspace_sim import recording
 from growspace_sim.agents.evaluation import AGENTS, make_agent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
-from growspace_sim.node.episode_runner import DEFAULT_NAMESPACE, EpisodeRunner
+from growspace_sim.node.episode_runner import EpisodeRunner
 from growspace_sim.ros import convert, names, qos as ros_qos
+from growspace_sim.ros.names import DEFAULT_NAMESPACE
 from growspace_sim.ros.interface import TOPICS
 
 
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
 def subscribe(args: argparse.Namespace) -> int:
     """Record a running chamber's topics over rclpy; returns the exit status."""
+    from growspace_sim.node.presence import ChamberWatch
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     namespace = names.normalize_namespace(args.namespace)
@@ -85,8 +87,13 @@ def subscribe(args: argparse.Namespace) -> int:
                 # keep_all on the reader: a slow disk must not make the middleware drop samples.
                 reader_qos = ros_qos.QosProfile(history='keep_all', durability=qos.durability)
                 transport.subscribe(typename, rel, reader_qos, record(rel, channel))
+            watch = ChamberWatch(transport, 'growspace-record',
+                                 lambda text: print(text, file=sys.stderr, flush=True))
             while deadline is None or time.monotonic() < deadline:
                 transport.spin_once(0.05)
+                if have_metadata:
+                    watch.seen()
+                watch.check()
         except KeyboardInterrupt:
             pass
         finally:

@@ -21,8 +21,10 @@ from typing import Any
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
+from growspace_sim.node.presence import ChamberWatch
 from growspace_sim.ros import convert
 from growspace_sim.ros import qos as ros_qos, types
+from growspace_sim.ros.names import DEFAULT_NAMESPACE
 
 QUIT, RESET = 'quit', 'reset'
 HELP = ('arrows: move (up/down: spotlight)   +/-: wider/narrower (bigger/smaller)   '
@@ -69,6 +71,7 @@ class Teleop:
         self.spot = False
         self.mode = 'lockstep'
         self.status = 'waiting for the node...'
+        self.config_seen = False
 
     def _on_result(self, msg: Any, _: bytes) -> None:
         self.last_result = msg
@@ -81,6 +84,7 @@ class Teleop:
         self.spot = int(msg.mode) == convert.MODE_SPOT
 
     def _on_config(self, msg: Any, _: bytes) -> None:
+        self.config_seen = True
         try:
             payload = json.loads(msg.data)
             self.mode = payload['mode']
@@ -118,8 +122,12 @@ class Teleop:
 def _loop(screen: Any, teleop: Teleop) -> None:
     curses.curs_set(0)
     screen.timeout(50)  # ms; keeps the screen fresh while messages arrive
+    watch = ChamberWatch(teleop.transport, 'teleop', lambda text: setattr(teleop, 'status', text))
     while True:
         teleop.transport.spin_once(0.0)
+        if teleop.config_seen:
+            watch.seen()
+        watch.check()
         screen.erase()
         for row, line in enumerate(teleop.lines()):
             screen.addnstr(row, 0, line, max(1, curses.COLS - 1))
@@ -147,7 +155,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               'publish commands with python -m growspace_sim.tools.pub', file=sys.stderr)
         return 2
     try:
-        transport = RclpyTransport('growspace_teleop', args=['teleop', *argv])
+        transport = RclpyTransport('growspace_teleop', DEFAULT_NAMESPACE,
+                                   args=['teleop', *argv])
     except Exception as e:  # noqa: BLE001 - rcl's own message names the bad argument
         print(f'teleop: {e}', file=sys.stderr)
         return 2
