@@ -107,7 +107,7 @@ shell_env() {
   echo "export AMENT_PREFIX_PATH=\"$ROOT/.venv\" CMAKE_PREFIX_PATH=\"$ROOT/.venv\""
   echo "export ROS_AUTOMATIC_DISCOVERY_RANGE=\"$ROS_AUTOMATIC_DISCOVERY_RANGE\""
   echo "export FASTRTPS_DEFAULT_PROFILES_FILE=\"$FASTRTPS_DEFAULT_PROFILES_FILE\""
-  echo "source \"$ROOT/install/setup.bash\""
+  echo "source \"$ROOT/install/local_setup.bash\""
 }
 
 # sandboxed CMD...: run CMD in a private network namespace holding only loopback, if the OS
