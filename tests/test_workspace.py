@@ -19,6 +19,7 @@ EXPECTED_PACKAGES = {
     'growspace_sim': 'ros.ament_python',
     'growspace_gym_bridge': 'ros.ament_python',
     'growspace_gantry': 'ros.ament_python',
+    'growspace_camera': 'ros.ament_python',
 }
 MANIFESTS = sorted((ROOT / 'src').glob('*/package.xml'))
 

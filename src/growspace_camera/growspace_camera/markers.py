@@ -48,7 +48,8 @@ class MarkerLayout:
                              f'got {self.dictionary!r}.')
         size = int(self.dictionary.rsplit('_', 1)[1])
         if len(self.ids) != 4 or len(set(self.ids)) != 4 or not all(
-                isinstance(i, int) and 0 <= i < size for i in self.ids):
+                isinstance(i, int) and not isinstance(i, bool) and 0 <= i < size
+                for i in self.ids):
             raise ValueError(f'marker_ids must be 4 different ids in 0..{size - 1}, '
                              f'got {list(self.ids)}.')
         if len(self.centres) != 4 or not all(
@@ -58,8 +59,9 @@ class MarkerLayout:
                              f'{self.centres!r}.')
         if not math.isfinite(self.side) or not 0.005 <= self.side <= 1.0:
             raise ValueError(f'marker_side must be in [0.005, 1.0] m, got {self.side!r}.')
-        points = np.array(self.centres, np.float64)
-        area = 0.5 * abs(np.cross(points[2] - points[0], points[3] - points[1]))
+        p = np.array(self.centres, np.float64)
+        (ax, az), (bx, bz) = p[2] - p[0], p[3] - p[1]
+        area = 0.5 * abs(ax * bz - az * bx)  # of the quadrilateral, from its diagonals
         if area < (2 * self.side) ** 2:
             raise ValueError(f'marker_centres must span a quadrilateral much larger than a '
                              f'marker (area {area:.4f} m^2 for {self.side} m markers).')

@@ -20,7 +20,7 @@ import numpy as np
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
 
-DIRECTION_PX = 6  # a tip's direction is taken over this many skeleton pixels
+DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
 
 
@@ -64,7 +64,7 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
         CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
     """
     g = skeleton_graph(mask, grid, params)
-    builder = _Builder(g, grid.pixel_m, first_m / grid.pixel_m, spacing_m / grid.pixel_m)
+    builder = _Builder(g, mask, grid, first_m / grid.pixel_m, spacing_m / grid.pixel_m)
     # Where a loop (branches crossing in the plane) was cut into a tree, the path ends
     # without an end point: it gets a node too, so the loop is drawn whole.
     leaf = np.zeros(g.pred.size, bool)
@@ -72,7 +72,7 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
     leaf[g.pred[(g.pred >= 0) & ~g.removed]] = False
     leaf &= ~g.removed
     key = g.junction | _corners(g, grid.shape, np.radians(params.corner_deg)) | leaf
-    builder.walk(key, leaf)
+    builder.walk(key)
     builder.refine_corners(np.radians(params.corner_deg), REFINE_LIMIT * spacing_m)
     plant = np.array(builder.plant, np.int16)
     lengths = np.bincount(plant[np.array(builder.node_of, np.int64)[builder.kept]],
@@ -87,8 +87,9 @@ def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.nda
     """Pixels where a path turns by ``min_rad`` or more, the sharpest in their 5 x 5 area."""
     image = np.zeros(shape, np.float32)
     image[g.rows, g.cols] = g.turning
+    turning = image[g.rows, g.cols]  # compared in float32, as the dilated peaks are
     peak = cv2.dilate(image, np.ones((5, 5), np.uint8))[g.rows, g.cols]
-    return (g.turning >= min_rad) & (g.turning >= peak) & ~g.removed
+    return (turning >= min_rad) & (turning >= peak) & ~g.removed
 
 
 @dataclass
@@ -139,9 +140,9 @@ def _intersect(first: tuple[np.ndarray, np.ndarray],
 class _Builder:
     """Walks the paths in order, placing nodes (see the module docstring)."""
 
-    def __init__(self, g: SkeletonGraph, pixel_m: float, first_px: float,
+    def __init__(self, g: SkeletonGraph, mask: np.ndarray, grid: Grid, first_px: float,
                  spacing_px: float) -> None:
-        self.g, self.pixel_m = g, pixel_m
+        self.g, self.mask, self.grid, self.pixel_m = g, mask, grid, grid.pixel_m
         self.first, self.spacing = first_px, spacing_px
         plants = g.roots.size
         self.nodes = [(float(x), 0.0) for x in g.root_x]  # each root on the floor
@@ -195,13 +196,13 @@ class _Builder:
         pixel = self.node_pixel[node]
         return float(self.g.radius[pixel]) * self.pixel_m if pixel >= 0 else 0.0
 
-    def walk(self, key: np.ndarray, leaf: np.ndarray) -> None:
-        """Place the nodes at the ``key`` pixels, path by path (``leaf``: a path ends)."""
+    def walk(self, key: np.ndarray) -> None:
+        """Place the nodes at the ``key`` pixels, path by path."""
         g = self.g
         pred, arc, removed = g.pred.tolist(), g.arc.tolist(), g.removed.tolist()
         end = np.zeros(len(pred), bool)
         end[g.ends] = True
-        key, end, leaf = key.tolist(), end.tolist(), leaf.tolist()
+        key, end = key.tolist(), end.tolist()
         for k, r in enumerate(g.roots.tolist()):
             self.node_of[r], self.since[r] = k, arc[r]  # a base's height above the floor
         for p in g.order.tolist():
@@ -214,19 +215,19 @@ class _Builder:
                 continue
             self.kept.append(p)
             if key[p]:
-                self._key(p, end[p], leaf[p])
+                self._key(p, end[p])
 
-    def _key(self, p: int, is_end: bool, is_leaf: bool) -> None:
+    def _key(self, p: int, is_end: bool) -> None:
         """Nodes up to key pixel ``p`` (a tip node at an end point)."""
         g, last = self.g, self.node_of[p]
         from_root = self.parent[last] < 0
         reach = self.since[p]
         position = g.xz[p]
-        if is_end:  # carry the tip on to the mask's edge
-            position = position + self._direction(p) * g.radius[p] * self.pixel_m
-            reach += g.radius[p]
+        if is_end:  # the tip is where the mask ends, beyond the skeleton's end
+            position = self._tip(p)
+            reach += float(np.hypot(*(position - g.xz[p]))) / self.pixel_m
         expected = self.first if from_root else self.spacing
-        if not is_leaf and reach < 0.5 * expected:
+        if not is_end and reach < 0.5 * expected:
             return  # the same node seen again (a junction's cluster, a corner's shoulder)
         if from_root:
             count = 1 + max(0, round((reach - self.first) / self.spacing))
@@ -270,8 +271,10 @@ class _Builder:
         self.node_pixel.append(-1)
         return len(self.nodes) - 1
 
-    def _direction(self, end: int) -> np.ndarray:
-        """Unit vector along the skeleton into an end point (x, z)."""
+    def _tip(self, end: int) -> np.ndarray:
+        """Where the mask ends beyond a skeleton end point (x, z) [m]: its pixels farthest
+        along the branch's direction, within a few radii of the end (thinning leaves the
+        skeleton's end short of the tip, and often hooked to one side)."""
         g, p = self.g, end
         for _ in range(DIRECTION_PX):
             if g.pred[p] < 0:
@@ -279,4 +282,22 @@ class _Builder:
             p = int(g.pred[p])
         d = g.xz[end] - g.xz[p]
         norm = float(np.hypot(*d))
-        return d / norm if norm > 0 else np.array([0.0, 1.0])
+        if norm == 0:
+            return g.xz[end]
+        d /= norm
+        reach = int(np.ceil(g.radius[end])) + 3  # px
+        r, c = int(g.rows[end]), int(g.cols[end])
+        top, left = max(0, r - reach), max(0, c - reach)
+        rows, cols = np.nonzero(self.mask[top:r + reach + 1, left:c + reach + 1])
+        offset = self.grid.xz(rows + top, cols + left) - g.xz[end]
+        along = offset @ d
+        # Only the branch's own pixels: those near its axis (not a neighbour's, beside it).
+        beside = np.abs(offset[:, 0] * d[1] - offset[:, 1] * d[0])
+        # A mask end farther than a radius or so beyond the skeleton's touches something else.
+        mine = (beside <= (g.radius[end] + 1.5) * self.pixel_m) \
+            & (along <= (g.radius[end] + 2.0) * self.pixel_m)
+        if not np.any(mine & (along > 0)):
+            return g.xz[end]
+        along = np.where(mine, along, -np.inf)
+        apex = offset[along >= along.max() - 0.5 * self.pixel_m]
+        return g.xz[end] + apex.mean(axis=0)
