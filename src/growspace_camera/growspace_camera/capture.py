@@ -286,7 +286,7 @@ class Camera:
         self.online = False
         self.ended = False  # a file source that does not loop is done
         self.accepted: dict[str, str] = {}
-        self.failure = ''  # why the source is offline, or why the last read failed
+        self.failure = ''  # why the source is offline (a sentence naming the source)
         self.frames = 0
         self._tries = 0
         self._next_try = 0.0
@@ -301,7 +301,7 @@ class Camera:
             self._lost(str(e))
             return
         except Exception as e:  # noqa: BLE001 - a driver's surprise must not end the node
-            self._lost(f'{type(e).__name__}: {e}')
+            self._lost(f'{self.source.name}: {type(e).__name__}: {e}')
             return
         self.online, self._tries, self.failure = True, 0, ''
         self.info(f'camera: {self.source.name} open: '
@@ -321,7 +321,7 @@ class Camera:
             self._drop(str(e))
             return None
         except Exception as e:  # noqa: BLE001 - same as in poll
-            self._drop(f'{type(e).__name__}: {e}')
+            self._drop(f'{self.source.name}: {type(e).__name__}: {e}')
             return None
         self.frames += 1
         return frame
@@ -350,6 +350,6 @@ class Camera:
         self._tries += 1
         self._next_try = self.clock() + wait
         if reason != self.failure:  # one line per new reason, not one per retry
-            self.warn(f'camera: {self.source.name}: {reason}; retrying every '
+            self.warn(f'camera: {reason}; retrying every '
                      f'{wait:g}-{self.backoff[-1]:g} s')
         self.failure = reason

@@ -193,7 +193,7 @@ class CameraNode:
             retry = f'; next try in {self.camera.retry_in_s:.1f} s' if not self.camera.ended \
                 else ''
             m = Measurement(ok=False, error=CameraError(
-                NO_PHOTO, f'{self.camera.source.name}: {self.camera.failure or "no frame"}'
+                NO_PHOTO, (self.camera.failure or f'{self.camera.source.name}: no frame')
                 + retry))
         else:
             m = self.pipeline.measure(frame.bgr, cfg, light, target, step)

@@ -184,7 +184,7 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float) -> np.ndarr
 
 
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
-    """The plant's pixels in a rectified photo: flat field, ExG, Otsu, clean-up.
+    """The plant's pixels in a rectified photo: balance, flat field, ExG, Otsu, clean-up.
 
     A first, rough threshold finds what to leave out of the flat field; the second runs on
     the flat-fielded photo. The threshold is Otsu's, but never below ``min_greenness``;
@@ -192,6 +192,10 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
     ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
     """
+    # The backdrop fills most of the chamber: its median colour balances the photo first,
+    # so that a tinted backdrop or white balance cannot pass for green.
+    balance = np.median(bgr[::3, ::3].reshape(-1, 3), axis=0)
+    bgr = bgr * (float(balance.mean()) / np.maximum(balance, 1.0)).astype(np.float32)
     first = greenness(bgr)
     rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
     rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
