@@ -46,6 +46,7 @@ from growspace_camera.pipeline import Pipeline
 from growspace_camera.twin import PhotoTwin
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
+from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.simulation import Simulation
 
 PHOTO_STEPS = (6, 12, 18, 24, 30, 36, 42, 48, 50)
@@ -108,6 +109,8 @@ def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation
 
 
 def closed_loop(episodes: int, twin: PhotoTwin) -> dict[str, dict[str, float]]:
+    """Per challenge: mean return of the privileged oracle, of the same oracle on the
+    simulator's plants (``sim_view``) and on the camera's measurement (``camera``)."""
     out = {}
     for challenge in CHALLENGES:
         returns = {'privileged': [], 'sim_view': [], 'camera': [], 'camera_estimate': []}
@@ -117,34 +120,9 @@ def closed_loop(episodes: int, twin: PhotoTwin) -> dict[str, dict[str, float]]:
             cfg = SimConfig(challenge=challenge, setting=setting)
             seed = 2000 + e
             for mode in ('privileged', 'sim_view', 'camera'):
-                sim = Simulation(cfg)
-                sim.reset(seed=seed)
-                oracle = cfg.task.oracle()
-                pipe = Pipeline(PipelineParamsDefault)
-                view = oracle_chamber(plant_view(sim.chamber.state), cfg)
-                total = estimate = 0.0
-                for step in range(1, cfg.episode_length + 1):
-                    if mode == 'privileged':
-                        action = oracle.act(sim.chamber)
-                    else:
-                        if mode == 'sim_view':
-                            view = oracle_chamber(plant_view(sim.chamber.state), cfg)
-                        action = oracle.act(view)
-                    sim.apply_discrete(action)
-                    outcome = sim.step()
-                    total += outcome.reward
-                    if mode == 'camera':
-                        photo = twin.photo(sim.chamber, seed=seed * 100 + step)
-                        m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(),
-                                         target_of(sim), sim.chamber.steps)
-                        if m.ok:
-                            view = oracle_chamber(m.state, cfg)
-                            estimate += m.reward
-                        else:
-                            refused += 1
-                            view.state.light = sim.chamber.light.copy()
-                            view.state.steps = sim.chamber.steps
+                total, estimate, misses = _loop_episode(cfg, seed, mode, twin)
                 returns[mode].append(total)
+                refused += misses
                 if mode == 'camera':
                     returns['camera_estimate'].append(estimate)
         means = {k: float(np.mean(v)) for k, v in returns.items()}
@@ -152,6 +130,39 @@ def closed_loop(episodes: int, twin: PhotoTwin) -> dict[str, dict[str, float]]:
         means['refused'] = refused
         out[challenge] = means
     return out
+
+
+def _loop_episode(cfg: SimConfig, seed: int, mode: str,
+                  twin: PhotoTwin) -> tuple[float, float, int]:
+    """One episode; returns (the simulator's return, the camera's estimate of it, refused
+    photos). A refused photo leaves the oracle with the last view it had (none: stay)."""
+    sim = Simulation(cfg)
+    sim.reset(seed=seed)
+    oracle, pipe = cfg.task.oracle(), Pipeline(PipelineParamsDefault)
+    stay = (SPOT_ACTIONS if cfg.uses_spotlight else BEAM_ACTIONS).index('stay')
+    view, total, estimate, refused = None, 0.0, 0.0, 0
+    for step in range(cfg.episode_length + 1):
+        if step:
+            if mode == 'privileged':
+                action = oracle.act(sim.chamber)
+            else:
+                action = stay if view is None else oracle.act(view)
+            sim.apply_discrete(action)
+            total += sim.step().reward
+        if mode == 'sim_view':
+            view = oracle_chamber(plant_view(sim.chamber.state), cfg)
+        elif mode == 'camera':
+            photo = twin.photo(sim.chamber, seed=seed * 100 + step)
+            m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
+                             sim.chamber.steps)
+            if m.ok:
+                view = oracle_chamber(m.state, cfg)
+                estimate += m.reward if step else 0.0
+            else:
+                refused += 1
+                if view is not None:  # what the rig knows anyway: the light and the step
+                    view.state.light, view.state.steps = sim.chamber.light.copy(), step
+    return total, estimate, refused
 
 
 def speed(photos: int, twin: PhotoTwin) -> dict[str, float]:

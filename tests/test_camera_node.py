@@ -202,7 +202,7 @@ def test_bad_parameters_are_refused_with_the_name_value_and_range(params, match)
 def test_bad_marker_files_are_refused_naming_the_file_and_key(tmp_path):
     with pytest.raises(ParamError, match='cannot be read'):
         load_layout(str(tmp_path / 'nope.yaml'))
-    with pytest.raises(ParamError, match="needs exactly the keys"):
+    with pytest.raises(ParamError, match='needs exactly the keys'):
         layout_from_dict({'dictionary': 'DICT_4X4_50', 'ids': [0, 1, 2, 3]})
     good = {'dictionary': 'DICT_4X4_50', 'side_m': 0.06, 'ids': [0, 1, 2, 3],
             'centres_m': [[0, 0], [1, 0], [1, 1], [0, 1]]}

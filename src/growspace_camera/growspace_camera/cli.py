@@ -20,7 +20,6 @@ from pathlib import Path
 import sys
 
 import cv2
-import numpy as np
 
 from growspace_camera.measure import Target
 from growspace_camera.pipeline import overlay, Pipeline

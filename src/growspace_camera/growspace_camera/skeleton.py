@@ -119,8 +119,9 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     keep = ~removed[src] & ~removed[dst]
     junction = _degree(src[keep], dst[keep], n) >= 3
     return SkeletonGraph(
-        rows=rows, cols=cols, xz=grid.xz(rows, cols), order=order, pred=pred, arc=arc, radius=radius,
-        turning=_turning(_ancestors(pred, TURN_PX), rows, cols), junction=junction, removed=removed, ends=ends,
+        rows=rows, cols=cols, xz=grid.xz(rows, cols), order=order, pred=pred, arc=arc,
+        radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
+        junction=junction, removed=removed, ends=ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
         unattached=int(n - reached.sum()))
 

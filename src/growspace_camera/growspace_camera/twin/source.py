@@ -28,9 +28,9 @@ class TwinSource:
 
     name = 'twin'
 
-    def __init__(self, layout: MarkerLayout, seed: int = 0,
-                 jitter: TwinJitter = TwinJitter(), digit_source: str = 'auto') -> None:
-        self.twin = PhotoTwin(layout, jitter)
+    def __init__(self, layout: MarkerLayout, seed: int = 0, jitter: TwinJitter | None = None,
+                 digit_source: str = 'auto') -> None:
+        self.twin = PhotoTwin(layout, jitter or TwinJitter())
         self.seed = seed
         self.digit_source = digit_source
         self.sim: Simulation | None = None
