@@ -90,8 +90,14 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     Raises:
         CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
     """
-    skeleton = skeletonize(mask)
-    rows, cols = np.nonzero(skeleton)
+    # Thinning and distances on the plant's bounding box (with a margin) only: the chamber is
+    # mostly backdrop.
+    left, top, width, height_px = cv2.boundingRect(mask.astype(np.uint8))
+    top, left = max(0, top - 2), max(0, left - 2)
+    box = (slice(top, top + height_px + 4), slice(left, left + width + 4))
+    rows, cols = np.nonzero(skeletonize(mask[box]))
+    radius = cv2.distanceTransform(mask[box].astype(np.uint8), cv2.DIST_L2, 3)[rows, cols]
+    rows, cols = rows + top, cols + left
     n = rows.size
     if n == 0:
         raise CameraError(NO_PLANT, 'no plant in the photo (the mask is empty)')
@@ -101,7 +107,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
                           f'within base_band_m = {params.base_band_m} m of z = 0')
     root_cols = _stem_centres(mask, rows[roots], root_cols, band_px)
-    src, dst, weight = _edges(rows, cols, skeleton.shape)
+    src, dst, weight = _edges(rows, cols, mask.shape)
     # A virtual source joins every base at its height: arc length counts from z = 0.
     graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
                         (np.r_[src, np.full(roots.size, n)], np.r_[dst, roots])),
@@ -113,7 +119,6 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     order = np.argsort(dist[:n], kind='stable')[:int(reached.sum())]
     ancestor = _ancestors(pred, CHORD_PX)
     arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
-    radius = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)[rows, cols]
     removed, ends, pruned = _prune(order, pred, arc, _degree(src, dst, n), radius, roots,
                                    max(params.spur_m / grid.pixel_m, 1.0), params.spur_radii)
     keep = ~removed[src] & ~removed[dst]
