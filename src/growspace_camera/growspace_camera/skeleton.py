@@ -102,11 +102,12 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     if n == 0:
         raise CameraError(NO_PLANT, 'no plant in the photo (the mask is empty)')
     height, band_px = grid.shape[0], params.base_band_m / grid.pixel_m
-    roots, root_cols = _roots(rows, cols, height, band_px)
+    # A thick stem's skeleton stops about its radius above the cut end at the floor.
+    roots, root_cols = _roots(rows, cols, height, band_px + radius)
     if roots.size == 0:
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
                           f'within base_band_m = {params.base_band_m} m of z = 0')
-    root_cols = _stem_centres(mask, rows[roots], root_cols, band_px)
+    root_cols = _stem_centres(mask, rows[roots], root_cols, band_px + radius[roots])
     src, dst, weight = _edges(rows, cols, mask.shape)
     # A virtual source joins every base at its height: arc length counts from z = 0.
     graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
@@ -132,13 +133,13 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
 
 
 def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
-           band_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per group of touching skeleton pixels in the base band, its lowest pixel and its
-    median column; left to right."""
+           band_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per group of touching skeleton pixels in the base band (per pixel: its height), its
+    lowest pixel and its median column; left to right."""
     low = np.flatnonzero(rows >= height - band_px)
     if low.size == 0:
         return low, np.zeros(0)
-    top = height - int(np.ceil(band_px))  # the band's first row (or above it)
+    top = int(rows[low].min())  # the band's first row
     image = np.zeros((height - top + 2, int(cols.max()) + 3), np.uint8)
     image[rows[low] - top + 1, cols[low] + 1] = 1
     count, labels = cv2.connectedComponents(image, connectivity=8)
@@ -150,16 +151,17 @@ def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
 
 
 def _stem_centres(mask: np.ndarray, bottom: np.ndarray, columns: np.ndarray,
-                  band_px: float) -> np.ndarray:
+                  band_px: np.ndarray) -> np.ndarray:
     """Each stem's column: the median centre of its mask run over the base band's rows.
 
     The mask's two edges place a stem to a fraction of a pixel where its skeleton is only
     good to one (and hooks towards a corner of the stem's cut end)."""
     out = columns.astype(float).copy()
     height, width = mask.shape
-    for k, (low, column) in enumerate(zip(bottom.tolist(), columns.tolist())):
+    for k, (low, column, band) in enumerate(zip(bottom.tolist(), columns.tolist(),
+                                                np.broadcast_to(band_px, bottom.shape))):
         c, centres = int(round(column)), []
-        for row in mask[max(0, height - int(band_px)):low + 1]:
+        for row in mask[max(0, height - int(band)):]:
             if not row[c]:
                 continue
             left = c - int(np.argmin(row[c::-1])) if not row[:c + 1].all() else -1
