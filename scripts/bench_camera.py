@@ -84,6 +84,17 @@ def fidelity(episodes: int, twin: PhotoTwin) -> list[dict]:
     return rows
 
 
+def _cell_line(cell: list[dict]) -> str:
+    """One line of figures for the photos of one challenge and setting."""
+    ok = [r for r in cell if r['ok']]
+    iou = [r['iou'] for r in cell]
+    tips = sum(r['tips_1cm'] for r in cell) / max(1, sum(r['sim_tips'] for r in cell))
+    precision = sum(r['tip_precision'] for r in ok) / max(1, sum(r['cam_tips'] for r in ok))
+    mae = np.mean([abs(r['sim_reward'] - r['cam_reward']) for r in cell])
+    return (f'iou mean {np.mean(iou):.3f} p5 {np.percentile(iou, 5):.3f}, tips {tips:.3f} '
+            f'(precision {precision:.3f}), reward mae {mae:.4f}, refused {len(cell) - len(ok)}')
+
+
 def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation,
              outcome, m) -> dict:  # noqa: ANN001
     truth = sim.observe()[..., 1] > 0
@@ -98,7 +109,8 @@ def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation
     union = np.count_nonzero(truth | seen)
     measured = m.tree.nodes[m.tree.tips]
     if len(measured):
-        d = np.hypot(tips[:, None, 0] - measured[None, :, 0], tips[:, None, 1] - measured[None, :, 1])
+        d = np.hypot(tips[:, None, 0] - measured[None, :, 0],
+                     tips[:, None, 1] - measured[None, :, 1])
         hit, precise = int((d.min(axis=1) < 0.01).sum()), int((d.min(axis=0) < 0.01).sum())
     else:
         hit = precise = 0
@@ -219,22 +231,16 @@ def main(argv: list[str] | None = None) -> int:
     for challenge in CHALLENGES:
         for setting in ('easy', 'hard'):
             cell = [r for r in rows if r['challenge'] == challenge and r['setting'] == setting]
-            ok = [r for r in cell if r['ok']]
-            print(f'  {challenge:10s} {setting}: iou mean {np.mean([r["iou"] for r in cell]):.3f}'
-                  f' p5 {np.percentile([r["iou"] for r in cell], 5):.3f}, tips '
-                  f'{sum(r["tips_1cm"] for r in cell) / max(1, sum(r["sim_tips"] for r in cell)):.3f}'
-                  f' (precision {sum(r["tip_precision"] for r in ok) / max(1, sum(r["cam_tips"] for r in ok)):.3f})'
-                  f', reward mae {np.mean([abs(r["sim_reward"] - r["cam_reward"]) for r in cell]):.4f}'
-                  f', refused {len(cell) - len(ok)}')
+            print(f'  {challenge:10s} {setting}: ' + _cell_line(cell))
     for r in refused:
         print(f'  refused: {r["challenge"]} {r["setting"]} seed {r["seed"]} step {r["step"]}: '
               f'{r["error"]}')
     loop = closed_loop(args.loop_episodes, twin) if args.loop_episodes else {}
-    for challenge, figures in loop.items():
-        print(f'closed loop {challenge:10s}: privileged oracle {figures["privileged"]:.2f}, '
-              f'same oracle on the simulator\'s plants {figures["sim_view"]:.2f}, on the camera\'s '
-              f'{figures["camera"]:.2f} (camera\'s own estimate {figures["camera_estimate"]:.2f}); '
-              f'ratio {figures["ratio"]:.3f}; refused photos {figures["refused"]}')
+    for challenge, f in loop.items():
+        print(f'closed loop {challenge:10s}: privileged oracle {f["privileged"]:.2f}, the same '
+              f'oracle on the simulator\'s plants {f["sim_view"]:.2f}, on the camera\'s '
+              f'{f["camera"]:.2f} (camera\'s own estimate {f["camera_estimate"]:.2f}); ratio '
+              f'{f["ratio"]:.3f}; refused photos {f["refused"]}')
     split = speed(args.speed_photos, twin)
     print('speed (median ms, one core): ' + ', '.join(f'{k} {v:.1f}' for k, v in split.items()))
     if args.json:

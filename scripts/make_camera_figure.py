@@ -6,7 +6,7 @@ pipeline saw (``pipeline.overlay``: the mask green, markers outlined, tips circl
 simulator's own observation above the one the camera measured from that photo (84 px, shown
 at 4x).
 
-Usage (workspace sourced): python scripts/make_camera_figure.py [--out docs/figures/camera_twin.jpg]
+Usage (workspace sourced): python scripts/make_camera_figure.py [--out FILE.jpg]
 """
 
 from __future__ import annotations

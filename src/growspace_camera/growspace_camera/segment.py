@@ -22,6 +22,7 @@ from growspace_camera.errors import CameraError, EXPOSURE
 SATURATED = 250  # grey level from which a pixel counts as clipped
 EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
+NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
 
@@ -200,7 +201,13 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
     rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
     exg = greenness(cv2.GaussianBlur(flat_field(bgr, rough, params.pixel_m), (3, 3), 0))
-    threshold = max(_otsu(exg), params.min_greenness)
+    # Otsu splits two classes; with two plants of different greens it splits the backdrop
+    # from the greener one and loses the other. Whatever stands clearly out of the
+    # backdrop's own noise is plant, so the threshold never exceeds that level.
+    sample = exg[::3, ::3]
+    centre = float(np.median(sample))
+    noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
+    threshold = max(min(_otsu(exg), centre + NOISE_SIGMAS * noise), params.min_greenness)
     low = max(0.5 * threshold, params.min_greenness)
     mask = apply_hysteresis_threshold(exg, low, threshold).astype(np.uint8)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))

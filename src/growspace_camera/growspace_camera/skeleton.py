@@ -107,7 +107,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     if roots.size == 0:
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
                           f'within base_band_m = {params.base_band_m} m of z = 0')
-    root_cols = _stem_centres(mask, rows[roots], root_cols, band_px + radius[roots])
+    root_cols = _stem_centres(mask, root_cols, band_px + radius[roots])
     src, dst, weight = _edges(rows, cols, mask.shape)
     # A virtual source joins every base at its height: arc length counts from z = 0.
     graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
@@ -150,16 +150,14 @@ def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
     return np.array([r[0] for r in found], np.int64), np.array([r[1] for r in found])
 
 
-def _stem_centres(mask: np.ndarray, bottom: np.ndarray, columns: np.ndarray,
-                  band_px: np.ndarray) -> np.ndarray:
+def _stem_centres(mask: np.ndarray, columns: np.ndarray, band_px: np.ndarray) -> np.ndarray:
     """Each stem's column: the median centre of its mask run over the base band's rows.
 
     The mask's two edges place a stem to a fraction of a pixel where its skeleton is only
     good to one (and hooks towards a corner of the stem's cut end)."""
     out = columns.astype(float).copy()
     height, width = mask.shape
-    for k, (low, column, band) in enumerate(zip(bottom.tolist(), columns.tolist(),
-                                                np.broadcast_to(band_px, bottom.shape))):
+    for k, (column, band) in enumerate(zip(columns.tolist(), band_px.tolist())):
         c, centres = int(round(column)), []
         for row in mask[max(0, height - int(band)):]:
             if not row[c]:
