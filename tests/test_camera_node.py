@@ -123,21 +123,29 @@ def test_a_missing_device_is_a_status_and_a_retry_not_a_traceback(tmp_path):
     assert len(lost) == 1 and 'retrying every 0.5-2 s' in lost[0]
 
 
+class CountingSource(PhotoSource):
+    """A folder of photos that notes when it was asked to open."""
+
+    def __init__(self, folder: str, clock) -> None:  # noqa: ANN001
+        super().__init__(folder, loop=True)
+        self.clock, self.tries = clock, []
+
+    def open(self) -> dict[str, str]:
+        self.tries.append(self.clock.t)
+        return super().open()
+
+
 def test_camera_backs_off_and_comes_back(tmp_path):
     clock = SimpleNamespace(t=0.0)
     warnings, infos = [], []
     folder = tmp_path / 'shots'
-    camera = Camera(PhotoSource(str(folder), loop=True), warnings.append, infos.append,
-                    lambda: clock.t, retry_max_s=5.0)
+    source = CountingSource(str(folder), clock)
+    camera = Camera(source, warnings.append, infos.append, lambda: clock.t, retry_max_s=5.0)
     shot = Shot(SimConfig(), None, 0)
-    tries = []
     for t in np.arange(0.0, 12.0, 0.25):
         clock.t = float(t)
-        before = camera._tries
         assert camera.read(shot) is None
-        if camera._tries != before:
-            tries.append(float(t))
-    assert tries[:5] == [0.0, 0.5, 1.5, 3.5, 8.5]  # 0.5, 1, 2, 5 s apart
+    assert source.tries[:5] == [0.0, 0.5, 1.5, 3.5, 8.5]  # 0.5, 1, 2, 5 s apart
     assert len(warnings) == 1 and 'no photos' in warnings[0]
     folder.mkdir()
     sim = Simulation(SimConfig())

@@ -29,7 +29,7 @@ import cv2
 
 from growspace_camera import messages as wire
 from growspace_camera.capture import Camera, Frame, Shot
-from growspace_camera.errors import CameraError, NO_PHOTO
+from growspace_camera.errors import BAD_INPUT, CameraError, NO_PHOTO
 from growspace_camera.measure import Target
 from growspace_camera.pipeline import Measurement, overlay, Pipeline
 from growspace_camera.settings import CameraParams
@@ -143,7 +143,7 @@ class CameraNode:
         cfg, light = model.cfg, model.chamber.light.copy()
         if self.seed is None:
             m = Measurement(ok=False, error=CameraError(
-                'bad_input', "the episode's target is unknown: chamber/config carried no seed "
+                BAD_INPUT, "the episode's target is unknown: chamber/config carried no seed "
                 "(a continued random stream); reset with a seed"))
             frame = self._capture(Shot(cfg, light, self.steps, None, self.episode))
         else:

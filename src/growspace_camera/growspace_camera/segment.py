@@ -187,12 +187,21 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float) -> np.ndarr
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     """The plant's pixels in a rectified photo: balance, flat field, ExG, Otsu, clean-up.
 
+    A chamber with a colour clipped in more than ``max_saturated`` of it is refused: where a
+    channel is clipped, the flat field cannot take the lamp's colour out, and a green stem
+    under a magenta lamp would read as brown.
+
     A first, rough threshold finds what to leave out of the flat field; the second runs on
     the flat-fielded photo. The threshold is Otsu's, but never below ``min_greenness``;
     pixels down to half of it are kept where they join a pixel above it (hysteresis: thin
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
     ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
     """
+    clipped = float(np.count_nonzero(bgr.max(axis=2) >= SATURATED)) / (bgr.size // 3)
+    if clipped > params.max_saturated:
+        raise CameraError(EXPOSURE, f'the chamber is overexposed: a colour is clipped in '
+                          f'{clipped:.0%} of it > max_saturated {params.max_saturated:.0%} '
+                          f'(the lamp\'s light at this exposure? shorten exposure)')
     # The backdrop fills most of the chamber: its median colour balances the photo first,
     # so that a tinted backdrop or white balance cannot pass for green.
     balance = np.median(bgr[::3, ::3].reshape(-1, 3), axis=0)

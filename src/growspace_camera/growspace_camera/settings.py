@@ -38,6 +38,7 @@ CAMERA_BOUNDS = {
     'dark_level': Bounds(0.0, 1.0), 'max_saturated': _FRACTION,
     'base_band_m': Bounds(0.002, 0.5), 'spur_m': Bounds(0.0, 0.5),
     'spur_radii': Bounds(0.0, 20.0), 'corner_deg': Bounds(1.0, 90.0),
+    'min_stem_m': Bounds(0.0, 1.0),
     'max_fit_error_m': Bounds(0.0001, 0.1), 'segmentation_scale': Bounds(0.05, 1.0),
 }
 SOURCE_RULE = ("'twin', a V4L2 device (/dev/videoN or its index), a video file, a folder of "
@@ -73,6 +74,7 @@ class CameraParams:
     spur_m: float = 0.015  # end branches shorter than this are thinning spurs [m]
     spur_radii: float = 2.0  # ... or shorter than this many stem radii
     corner_deg: float = 15.0  # a skeleton turning this much has a node there [deg]
+    min_stem_m: float = 0.05  # a stem base carrying less plant than this is a speck [m]
     max_fit_error_m: float = 0.005  # largest RMS marker-corner error of a plane fit [m]
     segmentation_scale: float = 0.5  # size of camera/segmentation relative to the photo
     frame_id: str = 'chamber'  # frame of plant state and measurements

@@ -38,12 +38,14 @@ class TreeParams:
         spur_m: End branches shorter than this are spurs [m] ...
         spur_radii: ... or shorter than this many stem radii at their junction.
         corner_deg: A path turning by at least this much has a node there [deg].
+        min_stem_m: A base carrying less skeleton than this is a speck, not a plant [m].
     """
 
     base_band_m: float = 0.03
     spur_m: float = 0.015
     spur_radii: float = 2.0
     corner_deg: float = 15.0
+    min_stem_m: float = 0.05
 
 
 @dataclass
@@ -118,6 +120,11 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     pred[pred == n] = -1
     reached = np.isfinite(dist[:n])
     order = np.argsort(dist[:n], kind='stable')[:int(reached.sum())]
+    roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, dist[:n],
+                                                  reached, params.min_stem_m / grid.pixel_m)
+    if roots.size == 0:
+        raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
+                          f'of a stem at least min_stem_m = {params.min_stem_m} m tall')
     ancestor = _ancestors(pred, CHORD_PX)
     arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
     removed, ends, pruned = _prune(order, pred, arc, _degree(src, dst, n), radius, roots,
@@ -148,6 +155,30 @@ def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
     found = sorted(((m[np.argmax(rows[m])], float(np.median(cols[m]))) for m in members),
                    key=lambda r: r[1])
     return np.array([r[0] for r in found], np.int64), np.array([r[1] for r in found])
+
+
+def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pred: np.ndarray,
+                dist: np.ndarray, reached: np.ndarray,
+                min_px: float) -> tuple[np.ndarray, ...]:
+    """Drop bases that carry less than ``min_px`` of skeleton (a speck of green on the soil
+    line is not a plant: every plant has at least its first stem); their pixels become
+    unattached."""
+    base = np.full(pred.size, -1, np.int64)
+    base[roots] = np.arange(roots.size)
+    pred_list, base_list = pred.tolist(), base.tolist()
+    for p in order.tolist():
+        if base_list[p] < 0:
+            base_list[p] = base_list[pred_list[p]]
+    base = np.array(base_list)
+    height = np.zeros(roots.size)
+    np.maximum.at(height, base[order], dist[order])
+    keep = height >= min_px
+    if keep.all():
+        return roots, root_cols, order, reached
+    order = order[keep[base[order]]]  # the kept bases stay in their left-to-right order
+    reached = np.zeros_like(reached)
+    reached[order] = True
+    return roots[keep], root_cols[keep], order, reached
 
 
 def _stem_centres(mask: np.ndarray, columns: np.ndarray, band_px: np.ndarray) -> np.ndarray:

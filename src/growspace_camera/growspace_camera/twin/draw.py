@@ -28,6 +28,8 @@ LAMP_EDGE_M = 0.015  # soft edge of the grow lamp's light (sigma) [m]
 LAMP_BGR = np.array([0.85, 0.3, 1.0], np.float32)  # red + blue LEDs: magenta
 POT_DEPTH_M, POT_TOP_M, POT_BOTTOM_M = 0.08, 0.10, 0.075
 SHIFT = 4  # cv2 fixed-point bits for sub-pixel drawing
+BACKDROP_LEVEL = (190.0, 225.0)  # grey level of the backdrop under the photo light alone
+WHITE = 235.0  # the level a rig's exposure keeps the brightest backdrop under
 NOISE_SEED = 20_24  # the sensor noise bank's own seed (photos crop it at drawn offsets)
 
 
@@ -40,7 +42,9 @@ class TwinJitter:
     tilt_deg: float = 4.0  # yaw and pitch at most this
     roll_deg: float = 2.0
     aim_m: float = 0.03  # aim point offset from the board centre at most this [m]
-    exposure: tuple[float, float] = (0.8, 1.1)  # overall gain
+    # Exposure as a rig's operator sets it (docs/hardware.md): the brightest backdrop, under
+    # the lamp, at this fraction of white (235 of 255), so nothing is clipped.
+    exposure: tuple[float, float] = (0.75, 1.0)
     white_balance: float = 0.06  # per-channel gain within 1 +- this
     vignette: tuple[float, float] = (0.0, 0.3)  # brightness lost in the photo's corners
     lamp: tuple[float, float] = (0.0, 0.5)  # the grow lamp's cast, fraction of the photo light
@@ -113,7 +117,8 @@ class PhotoTwin:
             _plant(canvas, to_canvas, rng, chamber, j)
         lit = _illumination(canvas.shape, to_canvas, rng, chamber, j)
         lamp = float(lit.max() - 1.0)
-        exposure = float(rng.uniform(*j.exposure))
+        brightest = BACKDROP_LEVEL[1] * float(lit.max())  # the backdrop where most light falls
+        exposure = float(rng.uniform(*j.exposure)) * WHITE / brightest
         lit *= canvas
         photo = _room(rng, self.size)
         warp = pose.homography() @ to_canvas.to_plane
@@ -192,7 +197,7 @@ def _backdrop(rng: np.random.Generator, x0: float, z0: float, x1: float,
     """A matte, slightly tinted board with low-frequency blotches and fine grain."""
     w = int(math.ceil((x1 - x0) / CANVAS_M))
     h = int(math.ceil((z1 - z0) / CANVAS_M))
-    base = rng.uniform(190.0, 225.0) * (1.0 + rng.uniform(-0.04, 0.04, 3))
+    base = rng.uniform(*BACKDROP_LEVEL) * (1.0 + rng.uniform(-0.04, 0.04, 3))
     coarse = rng.standard_normal((h // 40 + 2, w // 40 + 2, 3)).astype(np.float32)
     coarse = base.astype(np.float32) * (1.0 + 0.05 * cv2.GaussianBlur(coarse, (0, 0), 1.0))
     board = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
