@@ -18,9 +18,10 @@ Fixed method (every draw seeded, so a run is repeatable):
    after every step (a refused photo: the last measured view is kept). Returns are the
    simulator's rewards (the real plant's). closed_loop = (b) / (a), per challenge; the line
    reports the lowest. The privileged oracle (real photons) is run for reference.
-3. Speed. ``--speed-photos`` twin photos (1920 x 1080) measured on one pinned core with
-   OpenCV on one thread; the median time per step and in total (photo decoded, as a capture
-   delivers it; decoding the JPEG is listed apart).
+3. Speed. ``--speed-photos`` twin photos (1920 x 1080, control hard after steps 30-50)
+   measured on one pinned core with OpenCV on one thread, in 3 rounds; the fastest round's
+   median time per step and in total (photo decoded, as a capture delivers it; decoding the
+   JPEG is listed apart).
 
 Usage (workspace sourced): python scripts/bench_camera.py [--episodes 4] [--loop-episodes 20]
        [--speed-photos 60] [--json out.json]
@@ -50,6 +51,7 @@ from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.simulation import Simulation
 
 PHOTO_STEPS = (6, 12, 18, 24, 30, 36, 42, 48, 50)
+ROUNDS = 3  # speed rounds; the fastest round's medians are reported
 CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
 
 
@@ -193,18 +195,28 @@ def speed(photos: int, twin: PhotoTwin) -> dict[str, float]:
         if step >= 30:
             shots.append((twin.photo(sim.chamber, seed=step), sim.chamber.light.copy(),
                           target_of(sim), sim.chamber.steps))
-    pipe = Pipeline(PipelineParamsDefault)
-    laps: dict[str, list[float]] = {}
-    for k in range(photos):
-        photo, light, target, steps = shots[k % len(shots)]
-        start = time.perf_counter()
-        cv2.imdecode(np.frombuffer(photo.jpeg, np.uint8), cv2.IMREAD_COLOR)
-        laps.setdefault('decode (not counted)', []).append((time.perf_counter() - start) * 1e3)
-        m = pipe.measure(photo.bgr, cfg, light, target, steps)
-        assert m.ok, m.error
-        for name, ms in m.timings_ms.items():
-            laps.setdefault(name, []).append(ms)
-    return {name: float(np.median(v)) for name, v in laps.items()}
+    best: dict[str, float] = {}
+    for _ in range(ROUNDS):  # a shared machine only ever slows a round down: keep the best
+        pipe = Pipeline(PipelineParamsDefault)
+        laps: dict[str, list[float]] = {}
+        for k in range(photos):
+            photo, light, target, steps = shots[k % len(shots)]
+            start = time.perf_counter()
+            cv2.imdecode(np.frombuffer(photo.jpeg, np.uint8), cv2.IMREAD_COLOR)
+            laps.setdefault('decode (not counted)', []).append(
+                (time.perf_counter() - start) * 1e3)
+            m = pipe.measure(photo.bgr, cfg, light, target, steps)
+            assert m.ok, m.error
+            for name, ms in m.timings_ms.items():
+                laps.setdefault(name, []).append(ms)
+        medians = {name: float(np.median(v)) for name, v in laps.items()}
+        if not best or medians['total'] < best['total']:
+            best = medians
+    return best
+
+
+def _speed_line(split: dict[str, float]) -> str:
+    return 'speed (median ms, one core): ' + ', '.join(f'{k} {v:.1f}' for k, v in split.items())
 
 
 PipelineParamsDefault = Pipeline().params  # the defaults camera_node starts with
@@ -216,10 +228,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--loop-episodes', type=int, default=20,
                         help='closed-loop episodes per challenge (half easy, half hard)')
     parser.add_argument('--speed-photos', type=int, default=60)
+    parser.add_argument('--only-speed', action='store_true', help='skip fidelity and loop')
     parser.add_argument('--json', help='write every figure here')
     args = parser.parse_args(argv)
     assert set(CHALLENGES) <= set(tasks.names())
     twin = PhotoTwin(MarkerLayout())
+    if args.only_speed:
+        print(_speed_line(speed(args.speed_photos, twin)))
+        return 0
     started = time.time()
     rows = fidelity(args.episodes, twin)
     iou = np.array([r['iou'] for r in rows])
@@ -242,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
               f'{f["camera"]:.2f} (camera\'s own estimate {f["camera_estimate"]:.2f}); ratio '
               f'{f["ratio"]:.3f}; refused photos {f["refused"]}')
     split = speed(args.speed_photos, twin)
-    print('speed (median ms, one core): ' + ', '.join(f'{k} {v:.1f}' for k, v in split.items()))
+    print(_speed_line(split))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'fidelity': rows, 'closed_loop': loop, 'speed_ms': split}, f, indent=1)

@@ -197,15 +197,17 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
     ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
     """
-    clipped = float(np.count_nonzero(bgr.max(axis=2) >= SATURATED)) / (bgr.size // 3)
+    b, g, r = cv2.split(bgr)
+    clipped = np.count_nonzero(cv2.max(cv2.max(b, g), r) >= SATURATED) / b.size
     if clipped > params.max_saturated:
         raise CameraError(EXPOSURE, f'the chamber is overexposed: a colour is clipped in '
                           f'{clipped:.0%} of it > max_saturated {params.max_saturated:.0%} '
-                          f'(the lamp\'s light at this exposure? shorten exposure)')
+                          '(the light of the lamp at this exposure? shorten exposure)')
     # The backdrop fills most of the chamber: its median colour balances the photo first,
     # so that a tinted backdrop or white balance cannot pass for green.
     balance = np.median(bgr[::3, ::3].reshape(-1, 3), axis=0)
-    bgr = bgr * (float(balance.mean()) / np.maximum(balance, 1.0)).astype(np.float32)
+    gain = float(balance.mean()) / np.maximum(balance, 1.0)
+    bgr = cv2.multiply(bgr, (*gain.tolist(), 0.0))
     first = greenness(bgr)
     rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
     rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
@@ -228,7 +230,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     keep[0] = False
     keep[small] = False
     plant = keep[labels]
-    contrast = float(exg[plant].mean() - exg[~plant].mean()) if plant.any() else 0.0
+    inside = plant.astype(np.uint8)
+    contrast = cv2.mean(exg, inside)[0] - cv2.mean(exg, 1 - inside)[0] if inside.any() else 0.0
     if contrast < params.min_contrast:
         plant[:] = False
     return Segmentation(plant, float(threshold), contrast, specks)
