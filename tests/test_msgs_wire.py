@@ -34,8 +34,17 @@ GOLDEN_HASHES = {
     'rmw_dds_common/msg/ParticipantEntitiesInfo':
         'RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e',
 }
+CAMERA_MEASUREMENT = 'growspace_msgs/msg/CameraMeasurement'
+CAPTURE_REQUEST, CAPTURE_RESPONSE = ('growspace_msgs/srv/Capture_Request',
+                                     'growspace_msgs/srv/Capture_Response')
 OUR_TYPES = [types.LIGHT_COMMAND, types.PLANT_STATE, types.RESET_REQUEST, types.STEP_RESULT,
-             types.RESET_SRV_REQUEST, types.RESET_SRV_RESPONSE]
+             types.RESET_SRV_REQUEST, types.RESET_SRV_RESPONSE, CAMERA_MEASUREMENT,
+             CAPTURE_REQUEST, CAPTURE_RESPONSE]
+
+
+def filled(typename: str, **given: object) -> dict:
+    """Every field of a nested message: its defaults, then what is given."""
+    return {**types.to_plain(types.new(typename)), **given}
 
 
 def header(frame_id: str = 'chamber', sec: int = 1_700_000_123) -> dict:
@@ -70,6 +79,28 @@ SAMPLES = [
         'has_seed': True, 'seed': 42, 'challenge': 'shape', 'setting': 'easy'}),
     ('reset_srv_response', types.RESET_SRV_RESPONSE, {
         'success': False, 'message': 'unknown challenge "x"', 'reset_id': 0}),
+    ('camera_measurement', CAMERA_MEASUREMENT, {
+        'header': header(), 'step_id': 3, 'ok': True, 'error_code': '', 'error': '',
+        'reward': 0.625, 'plant_rewards': [0.625, 0.75], 'success': False,
+        'markers_seen': [0, 1, 3], 'fit_held': True, 'fit_age': 2, 'fit_error_m': 0.00125,
+        'exposure_mean': 0.5, 'saturated': 0.0, 'threshold': 0.25, 'contrast': 0.5,
+        'plant_pixels': 4321, 'specks': 7, 'skeleton_pixels': [300, 12],
+        'unattached_pixels': 3, 'tips': 5, 'tips_pruned': 1, 'pixel_size_m': 0.002,
+        'processing_s': 0.015625}),
+    ('capture_request', CAPTURE_REQUEST, {
+        'header': header(), 'step_id': 4, 'step': 4, 'config': '{"config": {}}',
+        'light': filled(types.LIGHT_COMMAND, header=header(), mode=0, x=0.5, width=0.25),
+        'has_point_target': True, 'target_x': 0.25, 'target_z': 0.75,
+        'target_mask': [0, 1, 1, 0]}),
+    ('capture_response_refused', CAPTURE_RESPONSE, {
+        'observation': filled('sensor_msgs/msg/Image', header=header('chamber_camera'),
+                              encoding='rgb8'),
+        'plant': filled(types.PLANT_STATE, header=header(), step_id=4),
+        'photo': filled('sensor_msgs/msg/CompressedImage', header=header('camera_optical'),
+                        format='jpeg'),
+        'measurement': filled(CAMERA_MEASUREMENT, header=header(), step_id=4, ok=False,
+                              error_code='markers',
+                              error='markers [0] of [0, 1, 2, 3] found')}),
     ('image_84x84_rgb8', 'sensor_msgs/msg/Image', {
         'header': header('camera_optical'), 'height': 84, 'width': 84, 'encoding': 'rgb8',
         'is_bigendian': 0, 'step': 252,
@@ -194,7 +225,7 @@ def test_constants_and_enum_values() -> None:
 def test_no_char_and_every_field_documented() -> None:
     root = types.msgs_dir()
     files = sorted((root / 'msg').glob('*.msg')) + sorted((root / 'srv').glob('*.srv'))
-    assert len(files) == 5
+    assert len(files) == 7
     for path in files:
         for line in path.read_text(encoding='utf-8').splitlines():
             code = line.split('#', 1)[0].strip()

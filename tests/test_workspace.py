@@ -19,6 +19,7 @@ EXPECTED_PACKAGES = {
     'growspace_sim': 'ros.ament_python',
     'growspace_gym_bridge': 'ros.ament_python',
     'growspace_gantry': 'ros.ament_python',
+    'growspace_camera': 'ros.ament_python',
 }
 MANIFESTS = sorted((ROOT / 'src').glob('*/package.xml'))
 
@@ -72,9 +73,11 @@ def test_colcon_finds_all_packages() -> None:
 def test_every_interface_parses_with_rosbags() -> None:
     texts = types.interface_texts(ROOT / 'src' / 'growspace_msgs')
     assert set(texts) == {
-        'growspace_msgs/msg/LightCommand', 'growspace_msgs/msg/PlantState',
-        'growspace_msgs/msg/ResetRequest', 'growspace_msgs/msg/StepResult',
-        'growspace_msgs/srv/Reset_Request', 'growspace_msgs/srv/Reset_Response'}
+        'growspace_msgs/msg/CameraMeasurement', 'growspace_msgs/msg/LightCommand',
+        'growspace_msgs/msg/PlantState', 'growspace_msgs/msg/ResetRequest',
+        'growspace_msgs/msg/StepResult', 'growspace_msgs/srv/Capture_Request',
+        'growspace_msgs/srv/Capture_Response', 'growspace_msgs/srv/Reset_Request',
+        'growspace_msgs/srv/Reset_Response'}
     for name, text in texts.items():
         short = name.rsplit('/', 1)[1]
         parsed = get_types_from_msg(text, f'growspace_msgs/msg/{short}')

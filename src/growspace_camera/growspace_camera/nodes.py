@@ -1,0 +1,303 @@
+"""Skeleton graph -> the simulator's node arrays: nodes at corners, junctions and tips.
+
+The simulator grows straight segments of one length (the first stem ``first_branch_height``,
+then ``branch_length``) from node to node; a branch leaves from a node, and a path can only
+turn at one. So along each path from a stem base, a node is placed at every *key* pixel (a
+corner where the path turns by ``corner_deg`` or more, a junction, an end point) that lies at
+least half a segment beyond the previous node, and the run between two nodes is divided into
+as many equal segments as its arc length holds. Arc length thus only has to be right between
+two corners, not from the floor up; a tip is the end point carried on to the mask's edge by
+the local radius.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from growspace_camera.segment import Grid
+from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
+
+DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
+REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
+
+
+@dataclass
+class PlantTree:
+    """The measured plants, as the simulator's node arrays (roots first, one per plant).
+
+    Attributes:
+        nodes: (N, 2) float64 node positions (x, z) [m]; the first ``plants`` are the roots.
+        parent: (N,) int32 parent node, -1 for a root; parent[i] < i.
+        plant: (N,) int16 plant of each node.
+        tips: (K,) int64 nodes that are measured tips (skeleton end points).
+        plants: Stem bases found.
+        tips_pruned: End points dropped as spurs.
+        skeleton_px: Skeleton pixels per plant (its length in pixels, roughly).
+        unattached_px: Skeleton pixels that no stem base reaches (loose bits of plant).
+    """
+
+    nodes: np.ndarray
+    parent: np.ndarray
+    plant: np.ndarray
+    tips: np.ndarray
+    plants: int
+    tips_pruned: int
+    skeleton_px: tuple[int, ...]
+    unattached_px: int
+
+
+def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
+                 params: TreeParams) -> PlantTree:
+    """The plants of a mask, as trees of nodes ``first_m`` then ``spacing_m`` apart.
+
+    Args:
+        mask: (rows, cols) bool plant mask on ``grid``.
+        grid: The rectified plane.
+        first_m: Arc length of the first node above a root [m] (the initial stem).
+        spacing_m: Arc length between later nodes [m] (a segment).
+        params: Base band, spur pruning, corners.
+
+    Raises:
+        CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
+    """
+    g = skeleton_graph(mask, grid, params)
+    builder = _Builder(g, mask, grid, first_m / grid.pixel_m, spacing_m / grid.pixel_m)
+    # Where a loop (branches crossing in the plane) was cut into a tree, the path ends
+    # without an end point: it gets a node too, so the loop is drawn whole.
+    leaf = np.zeros(g.pred.size, bool)
+    leaf[g.order] = True
+    leaf[g.pred[(g.pred >= 0) & ~g.removed]] = False
+    leaf &= ~g.removed
+    key = g.junction | _corners(g, grid.shape, np.radians(params.corner_deg)) | leaf
+    builder.walk(key)
+    builder.refine_corners(np.radians(params.corner_deg), REFINE_LIMIT * spacing_m)
+    plant = np.array(builder.plant, np.int16)
+    lengths = np.bincount(plant[np.array(builder.node_of, np.int64)[builder.kept]],
+                          minlength=g.roots.size) if builder.kept else np.zeros(g.roots.size)
+    return PlantTree(np.array(builder.nodes, np.float64).reshape(-1, 2),
+                     np.array(builder.parent, np.int32), plant,
+                     np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
+                     tuple(int(v) for v in lengths), g.unattached)
+
+
+def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.ndarray:
+    """Pixels where a path turns by ``min_rad`` or more, the sharpest in their 5 x 5 area."""
+    image = np.zeros(shape, np.float32)
+    image[g.rows, g.cols] = g.turning
+    turning = image[g.rows, g.cols]  # compared in float32, as the dilated peaks are
+    peak = cv2.dilate(image, np.ones((5, 5), np.uint8))[g.rows, g.cols]
+    return (turning >= min_rad) & (turning >= peak) & ~g.removed
+
+
+@dataclass
+class _Run:
+    """The skeleton between two key nodes: no corner inside, so one straight line."""
+
+    start: int  # the node it leaves
+    end: int  # the key node it reaches
+    inner: list[int]  # nodes placed evenly between them
+    pixels: np.ndarray  # (k, 2) its skeleton pixels (x, z) [m]
+    fractions: np.ndarray  # where along it start..end its nodes are (the last is 1)
+    end_radius: float  # the mask radius at its end [m]
+    was: tuple[np.ndarray, np.ndarray] = ()  # its ends before the corners were refined
+
+
+def _line(run: _Run, nodes: list, radius_at) -> tuple[np.ndarray, np.ndarray] | None:  # noqa: ANN001
+    """(point, unit direction) fitted to a run's pixels away from both of its ends, where the
+    stems they meet bend its skeleton; None when too little of it is left."""
+    a, b = np.array(nodes[run.start]), np.array(nodes[run.end])
+    trim_a, trim_b = radius_at(run.start) + 0.004, run.end_radius + 0.004
+    points = run.pixels
+    if len(points) < 5:
+        return None
+    keep = (np.hypot(*(points - a).T) > trim_a) & (np.hypot(*(points - b).T) > trim_b)
+    points = points[keep]
+    if len(points) < 5:
+        return None
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    direction = vt[0] if np.dot(vt[0], b - a) >= 0 else -vt[0]
+    return centre, direction
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> float:
+    return float(np.arccos(np.clip(np.dot(u, v), -1.0, 1.0)))
+
+
+def _intersect(first: tuple[np.ndarray, np.ndarray],
+               second: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+    (p, u), (q, v) = first, second
+    matrix = np.column_stack((u, -v))
+    if abs(np.linalg.det(matrix)) < 1e-6:
+        return None
+    t = np.linalg.solve(matrix, q - p)
+    return p + t[0] * u
+
+
+class _Builder:
+    """Walks the paths in order, placing nodes (see the module docstring)."""
+
+    def __init__(self, g: SkeletonGraph, mask: np.ndarray, grid: Grid, first_px: float,
+                 spacing_px: float) -> None:
+        self.g, self.mask, self.grid, self.pixel_m = g, mask, grid, grid.pixel_m
+        self.first, self.spacing = first_px, spacing_px
+        plants = g.roots.size
+        self.nodes = [(float(x), 0.0) for x in g.root_x]  # each root on the floor
+        self.parent, self.plant = [-1] * plants, list(range(plants))
+        self.node_pixel = g.roots.tolist()
+        self.tips: list[int] = []
+        n = g.pred.size
+        self.node_of, self.since = [-1] * n, [0.0] * n
+        self.kept: list[int] = []
+        self.runs: list[_Run] = []
+
+    def refine_corners(self, min_rad: float, limit_m: float) -> None:
+        """Move each corner node to where the straight lines of its two runs meet.
+
+        A thick stem's skeleton rounds its corners off (towards the inside, by up to its
+        radius); the runs' middles are straight, and where their lines cross is the node.
+        Nodes between two corners are then spaced evenly on the line again.
+        """
+        into = {run.end: run for run in self.runs}
+        out: dict[int, list[_Run]] = {}
+        for run in self.runs:
+            out.setdefault(run.start, []).append(run)
+        lines = {id(run): _line(run, self.nodes, self.radius_at) for run in self.runs}
+        for run in self.runs:
+            run.was = (np.array(self.nodes[run.start]), np.array(self.nodes[run.end]))
+        for node, arriving in into.items():
+            if node in self.tips or arriving.start < 0 or lines[id(arriving)] is None:
+                continue
+            best = None
+            for leaving in out.get(node, ()):
+                line = lines[id(leaving)]
+                if line is None:
+                    continue
+                angle = _angle(lines[id(arriving)][1], line[1])
+                if angle >= min_rad and (best is None or angle > best[0]):
+                    best = (angle, line)
+            if best is None:
+                continue
+            corner = _intersect(lines[id(arriving)], best[1])
+            if corner is not None and np.hypot(*(corner - self.nodes[node])) < limit_m:
+                self.nodes[node] = (float(corner[0]), float(corner[1]))
+        for run in self.runs:  # nodes between two ends follow them, the nearer one more
+            moved_a = np.array(self.nodes[run.start]) - run.was[0]
+            moved_b = np.array(self.nodes[run.end]) - run.was[1]
+            for k, t in zip(run.inner, run.fractions[:-1]):
+                self.nodes[k] = tuple(np.array(self.nodes[k]) + (1 - t) * moved_a
+                                      + t * moved_b)
+
+    def radius_at(self, node: int) -> float:
+        """The mask radius at a node's skeleton pixel [m] (0 for a placed-between node)."""
+        pixel = self.node_pixel[node]
+        return float(self.g.radius[pixel]) * self.pixel_m if pixel >= 0 else 0.0
+
+    def walk(self, key: np.ndarray) -> None:
+        """Place the nodes at the ``key`` pixels, path by path."""
+        g = self.g
+        pred, arc, removed = g.pred.tolist(), g.arc.tolist(), g.removed.tolist()
+        end = np.zeros(len(pred), bool)
+        end[g.ends] = True
+        key, end = key.tolist(), end.tolist()
+        for k, r in enumerate(g.roots.tolist()):
+            self.node_of[r], self.since[r] = k, arc[r]  # a base's height above the floor
+        for p in g.order.tolist():
+            q = pred[p]
+            if q < 0:
+                continue
+            self.node_of[p] = self.node_of[q]
+            self.since[p] = self.since[q] + arc[p] - arc[q]
+            if removed[p]:
+                continue
+            self.kept.append(p)
+            if key[p]:
+                self._key(p, end[p])
+
+    def _key(self, p: int, is_end: bool) -> None:
+        """Nodes up to key pixel ``p`` (a tip node at an end point)."""
+        g, last = self.g, self.node_of[p]
+        from_root = self.parent[last] < 0
+        reach = self.since[p]
+        position = g.xz[p]
+        if is_end:  # the tip is where the mask ends, beyond the skeleton's end
+            position = self._tip(p)
+            reach += float(np.hypot(*(position - g.xz[p]))) / self.pixel_m
+        expected = self.first if from_root else self.spacing
+        if not is_end and reach < 0.5 * expected:
+            return  # the same node seen again (a junction's cluster, a corner's shoulder)
+        if from_root:
+            count = 1 + max(0, round((reach - self.first) / self.spacing))
+            arcs = self.first + self.spacing * np.arange(count)
+            arcs *= reach / arcs[-1]
+        else:
+            count = max(1, round(reach / self.spacing))
+            arcs = reach * np.arange(1, count + 1) / count
+        path_s, path_xz = self._path(p, last, reach, position)
+        start, inner = last, []
+        for s in arcs[:-1]:
+            last = self._add(np.interp(s, path_s, path_xz[:, 0]),
+                             np.interp(s, path_s, path_xz[:, 1]), last)
+            inner.append(last)
+        node = self._add(float(position[0]), float(position[1]), last)
+        self.node_pixel[node] = p
+        self.runs.append(_Run(start, node, inner, path_xz[1:-1], arcs / reach,
+                              float(g.radius[p]) * self.pixel_m))
+        if is_end:
+            self.tips.append(node)
+        self.node_of[p], self.since[p] = node, 0.0
+
+    def _path(self, p: int, last: int, reach: float,
+              end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Arc positions and (x, z) of the path from node ``last`` to pixel ``p`` (ending at
+        ``end``, the key pixel or the tip beyond it)."""
+        g, stop = self.g, self.node_pixel[last]
+        pixels = []
+        while p != stop and p >= 0:
+            pixels.append(p)
+            p = int(g.pred[p])
+        pixels.reverse()
+        s = [0.0] + [self.since[k] for k in pixels] + [reach]
+        xz = [self.nodes[last]] + [tuple(g.xz[k]) for k in pixels] + [tuple(end)]
+        return np.maximum.accumulate(np.array(s)), np.array(xz)
+
+    def _add(self, x: float, z: float, parent: int) -> int:
+        self.nodes.append((float(x), float(z)))
+        self.parent.append(parent)
+        self.plant.append(self.plant[parent])
+        self.node_pixel.append(-1)
+        return len(self.nodes) - 1
+
+    def _tip(self, end: int) -> np.ndarray:
+        """Where the mask ends beyond a skeleton end point (x, z) [m]: its pixels farthest
+        along the branch's direction, within a few radii of the end (thinning leaves the
+        skeleton's end short of the tip, and often hooked to one side)."""
+        g, p = self.g, end
+        for _ in range(DIRECTION_PX):
+            if g.pred[p] < 0:
+                break
+            p = int(g.pred[p])
+        d = g.xz[end] - g.xz[p]
+        norm = float(np.hypot(*d))
+        if norm == 0:
+            return g.xz[end]
+        d /= norm
+        reach = int(np.ceil(g.radius[end])) + 3  # px
+        r, c = int(g.rows[end]), int(g.cols[end])
+        top, left = max(0, r - reach), max(0, c - reach)
+        rows, cols = np.nonzero(self.mask[top:r + reach + 1, left:c + reach + 1])
+        offset = self.grid.xz(rows + top, cols + left) - g.xz[end]
+        along = offset @ d
+        # Only the branch's own pixels: those near its axis (not a neighbour's, beside it).
+        beside = np.abs(offset[:, 0] * d[1] - offset[:, 1] * d[0])
+        # A mask end farther than a radius or so beyond the skeleton's touches something else.
+        mine = (beside <= (g.radius[end] + 1.5) * self.pixel_m) \
+            & (along <= (g.radius[end] + 2.0) * self.pixel_m)
+        if not np.any(mine & (along > 0)):
+            return g.xz[end]
+        along = np.where(mine, along, -np.inf)
+        apex = offset[along >= along.max() - 0.5 * self.pixel_m]
+        return g.xz[end] + apex.mean(axis=0)

@@ -1,0 +1,224 @@
+"""One photo -> the chamber's observation, plant state and reward, with how sure each is.
+
+The pipeline is a short script of the pure steps (PlantCV's way): exposure -> markers -> plane
+fit -> rectified photo -> plant mask -> trees of nodes -> measured ``ChamberState`` -> the
+task's reward and the simulator's drawing of it. A step that cannot read the photo raises
+``CameraError``; ``Pipeline.measure`` returns that as a measurement with ``ok`` False and no
+numbers, so a caller never gets a reward the photo did not give.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import time
+
+import cv2
+import numpy as np
+
+from growspace_camera.calibration import Calibrator, FitReport
+from growspace_camera.errors import CameraError
+from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
+from growspace_camera.measure import measured_state, Observer, score, Target
+from growspace_camera.segment import (
+    exposure, Exposure, Grid, plant_mask, rectify, SegmentParams, Segmentation)
+from growspace_camera.nodes import measure_tree, PlantTree
+from growspace_camera.skeleton import TreeParams
+from growspace_sim.core.config import SimConfig
+from growspace_sim.core.light import Light
+from growspace_sim.core.state import ChamberState
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Everything the pipeline accepts (camera_node's parameters of the same names)."""
+
+    layout: MarkerLayout = MarkerLayout()
+    segment: SegmentParams = SegmentParams()
+    tree: TreeParams = TreeParams()
+    max_fit_error_m: float = 0.005  # largest RMS marker-corner error of a fit or hold [m]
+
+
+@dataclass
+class Confidence:
+    """How sure a measurement is: what was seen and what was dropped on the way.
+
+    Attributes:
+        markers_seen: Marker ids found in this photo.
+        fit_held: The plane fit is an earlier photo's (some markers hidden here).
+        fit_age: Photos since the fit was made.
+        fit_error_m: RMS marker-corner error of the fit (or of the hold check) [m].
+        exposure_mean: Mean grey level of the photo [0-1].
+        saturated: Clipped fraction of the photo [0-1].
+        threshold: ExG threshold of the mask.
+        contrast: Mean ExG of plant minus backdrop.
+        plant_pixels: Mask pixels of plant.
+        specks: Mask pixels dropped as specks.
+        skeleton_px: Skeleton pixels per plant.
+        unattached_px: Skeleton pixels no stem base reaches.
+        tips: Tips measured.
+        tips_pruned: Skeleton end points dropped as spurs.
+    """
+
+    markers_seen: tuple[int, ...] = ()
+    fit_held: bool = False
+    fit_age: int = 0
+    fit_error_m: float = float('nan')
+    exposure_mean: float = float('nan')
+    saturated: float = float('nan')
+    threshold: float = float('nan')
+    contrast: float = float('nan')
+    plant_pixels: int = 0
+    specks: int = 0
+    skeleton_px: tuple[int, ...] = ()
+    unattached_px: int = 0
+    tips: int = 0
+    tips_pruned: int = 0
+
+
+@dataclass
+class Measurement:
+    """What one photo gave. With ``ok`` False only ``error`` and ``confidence`` count.
+
+    Attributes:
+        ok: Every step read the photo.
+        error: Why not (None when ok).
+        observation: (res, res, 3) uint8 RGB, the simulator's channel convention.
+        state: The measured ``ChamberState``.
+        tree: The measured plants as node arrays (positions in m).
+        reward, plant_rewards, success: The task's score of ``state``.
+        confidence: See ``Confidence``.
+        detections: The markers found (for the segmentation overlay).
+        fit: The plane fit used, if any.
+        grid: The rectified plane, if the photo got that far.
+        segmentation: The plant mask, if the photo got that far.
+        timings_ms: Milliseconds per step.
+    """
+
+    ok: bool
+    error: CameraError | None = None
+    observation: np.ndarray | None = field(default=None, repr=False)
+    state: ChamberState | None = field(default=None, repr=False)
+    tree: PlantTree | None = field(default=None, repr=False)
+    reward: float = 0.0
+    plant_rewards: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    success: bool = False
+    confidence: Confidence = field(default_factory=Confidence)
+    detections: list[Detection] = field(default_factory=list, repr=False)
+    fit: FitReport | None = field(default=None, repr=False)
+    grid: Grid | None = None
+    segmentation: Segmentation | None = field(default=None, repr=False)
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+class Pipeline:
+    """Measures photos; keeps the last good plane fit between them.
+
+    Args:
+        params: See ``PipelineParams``.
+    """
+
+    def __init__(self, params: PipelineParams = PipelineParams()) -> None:
+        self.params = params
+        self.detector = MarkerDetector(params.layout)
+        self.calibrator = Calibrator(params.layout, params.max_fit_error_m)
+        self.observer = Observer()
+
+    def measure(self, photo: np.ndarray, cfg: SimConfig, light: Light, target: Target,
+                steps: int = 0) -> Measurement:
+        """Measure one photo.
+
+        Args:
+            photo: (H, W, 3) uint8 BGR photo (as OpenCV captures and decodes).
+            cfg: The chamber's configuration (challenge, sizes, node spacing).
+            light: The light the gantry reached (drawn blue in the observation).
+            target: The task's target of this episode (drawn red, scored against).
+            steps: Steps taken in the episode (the state's ``steps``).
+
+        Returns:
+            The measurement; ``ok`` False with ``error`` when the photo could not be read.
+        """
+        out = Measurement(ok=False)
+        clock = _Clock(out.timings_ms)
+        try:
+            self._measure(photo, cfg, light, target, steps, out, clock)
+        except CameraError as e:
+            out.ok, out.error = False, e
+            out.reward, out.plant_rewards, out.success = 0.0, np.zeros(0), False
+        out.timings_ms['total'] = sum(out.timings_ms.values())
+        return out
+
+    def _measure(self, photo: np.ndarray, cfg: SimConfig, light: Light, target: Target,
+                 steps: int, out: Measurement, clock: _Clock) -> None:
+        p, c = self.params, out.confidence
+        gray = to_gray(photo)
+        small = self.detector.shrink(gray)
+        seen: Exposure = exposure(small, p.segment)
+        c.exposure_mean, c.saturated = seen.mean, seen.saturated
+        clock.lap('exposure')
+        out.detections = self.detector.detect(gray, small)
+        c.markers_seen = tuple(d.marker_id for d in out.detections)
+        clock.lap('markers')
+        out.fit = report = self.calibrator.update(out.detections)
+        c.fit_held, c.fit_age, c.fit_error_m = report.held, report.age, report.check_error_m
+        out.grid = grid = Grid(cfg.chamber_width, cfg.chamber_height, p.segment.pixel_m)
+        rectified = rectify(photo, report.fit, grid)
+        clock.lap('rectify')
+        out.segmentation = seg = plant_mask(rectified, p.segment)
+        c.threshold, c.contrast, c.specks = seg.threshold, seg.contrast, seg.specks
+        c.plant_pixels = int(np.count_nonzero(seg.mask))
+        clock.lap('segment')
+        out.tree = tree = measure_tree(seg.mask, grid, cfg.width_m(cfg.first_branch_height),
+                                       cfg.branch_length_m, p.tree)
+        c.skeleton_px, c.unattached_px = tree.skeleton_px, tree.unattached_px
+        c.tips, c.tips_pruned = int(tree.tips.size), tree.tips_pruned
+        clock.lap('skeleton')
+        out.state = state = measured_state(tree, cfg, light, target, steps)
+        reward, plant_rewards, success = score(state, cfg)
+        out.reward, out.plant_rewards, out.success = float(reward), plant_rewards, bool(success)
+        clock.lap('reward')
+        out.observation = self.observer.image(state, cfg)
+        clock.lap('observation')
+        out.ok = True
+
+
+def overlay(photo: np.ndarray, measurement: Measurement, scale: float = 0.5) -> np.ndarray:
+    """The segmentation picture for people: the mask in green, markers outlined, tips red.
+
+    Args:
+        photo: The measured photo (BGR).
+        measurement: Its measurement.
+        scale: Size of the picture relative to the photo.
+
+    Returns:
+        (h, w, 3) uint8 BGR.
+    """
+    picture = cv2.resize(photo, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    fit, grid, seg = measurement.fit, measurement.grid, measurement.segmentation
+    if fit is not None and grid is not None and seg is not None:
+        rows, cols = np.nonzero(seg.mask)
+        pixels = fit.fit.photo_points(grid.xz(rows, cols)) * scale
+        inside = np.all((pixels >= 0) & (pixels < picture.shape[1::-1]), axis=1)
+        r, c = pixels[inside, 1].astype(int), pixels[inside, 0].astype(int)
+        picture[r, c] = (0.4 * picture[r, c] + (0, 153, 0)).astype(np.uint8)
+        tree = measurement.tree
+        if tree is not None and tree.tips.size:
+            for x, y in fit.fit.photo_points(tree.nodes[tree.tips]) * scale:
+                cv2.circle(picture, (int(x), int(y)), 4, (0, 0, 255), 2)
+    for d in measurement.detections:
+        cv2.polylines(picture, [np.rint(d.corners * scale).astype(np.int32)], True,
+                      (255, 0, 255), 2)
+    if not measurement.ok and measurement.error is not None:
+        cv2.putText(picture, str(measurement.error)[:90], (10, 30), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.7, (0, 0, 255), 2)
+    return picture
+
+
+class _Clock:
+    def __init__(self, laps: dict[str, float]) -> None:
+        self.laps = laps
+        self.last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.laps[name] = (now - self.last) * 1000.0
+        self.last = now

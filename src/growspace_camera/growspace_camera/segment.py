@@ -1,0 +1,244 @@
+"""Photo -> plant mask on the chamber plane: exposure checks, rectification, greenness, Otsu.
+
+Each step is a plain function of arrays (PlantCV's way): ``exposure`` reads the photo's grey
+levels, ``rectify`` warps the chamber square of the photo to a top-left-origin grid of the
+plane (``Grid``), ``flat_field`` divides out the light falling on the backdrop (the grow lamp's
+coloured cast, vignetting), ``greenness`` is the excess-green index ExG = 2g - r - b on
+chromatic coordinates (Woebbecke et al. 1995), and ``plant_mask`` thresholds it with Otsu's
+method, floored so that a plant-free photo stays empty, then cleans the mask up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from skimage.filters import apply_hysteresis_threshold
+
+from growspace_camera.calibration import PlaneFit
+from growspace_camera.errors import CameraError, EXPOSURE
+
+SATURATED = 250  # grey level from which a pixel counts as clipped
+EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
+BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
+NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
+_SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
+_EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
+
+
+@dataclass(frozen=True)
+class SegmentParams:
+    """What the segmentation accepts (ROS parameters of camera_node, same names).
+
+    Attributes:
+        pixel_m: Side of a rectified pixel on the plant plane [m].
+        min_greenness: Lowest ExG threshold, whatever Otsu finds (keeps an empty pot empty).
+        min_contrast: Mean ExG of plant minus backdrop below which nothing counts as plant.
+        min_area_m2: Smaller specks are not plant [m^2].
+        dark_level: A photo whose mean grey level is below this is too dark [0-1].
+        max_saturated: A photo with more clipped pixels than this is overexposed [0-1].
+    """
+
+    pixel_m: float = 0.002
+    min_greenness: float = 0.06
+    min_contrast: float = 0.08
+    min_area_m2: float = 0.0001
+    dark_level: float = 0.08
+    max_saturated: float = 0.2
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The rectified plane: pixel (row, column) centre <-> chamber (x, z) [m]; row 0 on top."""
+
+    width_m: float
+    height_m: float
+    pixel_m: float
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(round(self.height_m / self.pixel_m)), int(round(self.width_m / self.pixel_m)))
+
+    def to_plane(self) -> np.ndarray:
+        """(3, 3) grid (column, row, 1) -> chamber (x, z, 1)."""
+        s, h = self.pixel_m, self.shape[0] * self.pixel_m
+        return np.array([[s, 0.0, 0.5 * s], [0.0, -s, h - 0.5 * s], [0.0, 0.0, 1.0]])
+
+    def xz(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(N, 2) chamber (x, z) [m] of grid pixel centres."""
+        s, h = self.pixel_m, self.shape[0] * self.pixel_m
+        return np.column_stack(((np.asarray(cols) + 0.5) * s, h - (np.asarray(rows) + 0.5) * s))
+
+
+@dataclass(frozen=True)
+class Exposure:
+    """How the photo is exposed: mean grey level and clipped fraction [0-1]."""
+
+    mean: float
+    saturated: float
+
+
+@dataclass
+class Segmentation:
+    """A plant mask on the grid, and how sure it is.
+
+    Attributes:
+        mask: (rows, cols) bool, True = plant.
+        threshold: The ExG threshold used (Otsu's, or the floor).
+        contrast: Mean ExG of the plant pixels minus that of the rest.
+        specks: Pixels removed as specks (components smaller than ``min_area_m2``).
+    """
+
+    mask: np.ndarray
+    threshold: float
+    contrast: float
+    specks: int
+
+
+def exposure(gray: np.ndarray, params: SegmentParams) -> Exposure:
+    """Check a photo's exposure.
+
+    Raises:
+        CameraError: ``EXPOSURE`` for a photo too dark or too clipped to read.
+    """
+    mean = float(gray.mean()) / 255.0
+    saturated = float(np.count_nonzero(gray >= SATURATED)) / gray.size
+    if mean < params.dark_level:
+        raise CameraError(EXPOSURE, f'the photo is too dark: mean grey level {mean:.3f} < '
+                          f'dark_level {params.dark_level} (lamp or photo light off, lens '
+                          f'covered, exposure too short)')
+    if saturated > params.max_saturated:
+        raise CameraError(EXPOSURE, f'the photo is overexposed: {saturated:.0%} of it is '
+                          f'clipped > max_saturated {params.max_saturated:.0%} (exposure too '
+                          f'long, gain too high)')
+    return Exposure(mean, saturated)
+
+
+def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
+    """The grid's view of the plane, warped from the photo (float32 BGR).
+
+    The photo's chamber region is first shrunk (area interpolation) to about one photo pixel
+    per grid pixel, so the warp samples without aliasing.
+    """
+    rows, cols = grid.shape
+    corners = fit.photo_points(grid.xz(np.array([0, 0, rows - 1, rows - 1]),
+                                       np.array([0, cols - 1, cols - 1, 0])))
+    h, w = photo.shape[:2]
+    left, top = np.floor(np.clip(corners.min(axis=0) - 4, 0, [w - 1, h - 1])).astype(int)
+    right, bottom = np.ceil(np.clip(corners.max(axis=0) + 5, 1, [w, h])).astype(int)
+    crop = photo[top:bottom, left:right]
+    scale = min(1.0, 1.0 / (grid.pixel_m * fit.px_per_m((0.5 * grid.width_m,
+                                                          0.5 * grid.height_m))))
+    if scale < 0.95:
+        crop = cv2.resize(crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    else:
+        scale = 1.0
+    sy, sx = crop.shape[0] / (bottom - top), crop.shape[1] / (right - left)
+    # grid pixel -> plane -> photo -> crop -> shrunk crop (pixel centres throughout)
+    shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5 - left * sx],
+                       [0.0, sy, 0.5 * sy - 0.5 - top * sy], [0.0, 0.0, 1.0]])
+    warp = shrink @ fit.to_photo @ grid.to_plane()
+    out = cv2.warpPerspective(crop, warp, (cols, rows), flags=cv2.INTER_LINEAR
+                              | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    return out.astype(np.float32)
+
+
+def greenness(bgr: np.ndarray) -> np.ndarray:
+    """Excess green ExG = 2g - r - b of chromatic coordinates (c / (b + g + r)), float32.
+
+    A small constant in the sum keeps dark pixels from getting a loud, noisy chromaticity.
+    """
+    total = cv2.transform(bgr, _SUM)
+    total += 30.0
+    return cv2.divide(cv2.transform(bgr, _EXCESS_GREEN), total)
+
+
+def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float) -> np.ndarray:
+    """Divide out the light falling on the backdrop, estimated away from the plant.
+
+    The backdrop is neutral and everywhere behind the plant, so its local average colour is
+    the local light (the white photo light, the grow lamp's cast where it falls, vignetting).
+
+    Args:
+        bgr: (rows, cols, 3) float32 rectified photo.
+        exclude: (rows, cols) bool, pixels that may be plant (left out of the estimate).
+        pixel_m: Grid pixel [m].
+
+    Returns:
+        The photo as if lit evenly, at its backdrop's mean grey level (float32).
+    """
+    size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
+    backdrop = (~exclude).astype(np.float32)
+    if not backdrop.any():
+        return bgr
+    weight = cv2.blur(backdrop, size)
+    light = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
+    # Where the window holds (almost) no backdrop, the backdrop's average light stands in.
+    thin = weight < 0.05
+    light = cv2.divide(light, cv2.merge((np.maximum(weight, 1e-6),) * 3))
+    light[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
+    np.maximum(light, 1.0, out=light)
+    # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
+    level = float(np.mean(cv2.mean(light)[:3]))
+    return cv2.divide(bgr, light, scale=level)
+
+
+def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
+    """The plant's pixels in a rectified photo: balance, flat field, ExG, Otsu, clean-up.
+
+    A chamber with a colour clipped in more than ``max_saturated`` of it is refused: where a
+    channel is clipped, the flat field cannot take the lamp's colour out, and a green stem
+    under a magenta lamp would read as brown.
+
+    A first, rough threshold finds what to leave out of the flat field; the second runs on
+    the flat-fielded photo. The threshold is Otsu's, but never below ``min_greenness``;
+    pixels down to half of it are kept where they join a pixel above it (hysteresis: thin
+    twig ends are paler than stems). When the plant stands out from the backdrop by less than
+    ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
+    """
+    b, g, r = cv2.split(bgr)
+    clipped = np.count_nonzero(cv2.max(cv2.max(b, g), r) >= SATURATED) / b.size
+    if clipped > params.max_saturated:
+        raise CameraError(EXPOSURE, f'the chamber is overexposed: a colour is clipped in '
+                          f'{clipped:.0%} of it > max_saturated {params.max_saturated:.0%} '
+                          '(the light of the lamp at this exposure? shorten exposure)')
+    # The backdrop fills most of the chamber: its median colour balances the photo first,
+    # so that a tinted backdrop or white balance cannot pass for green.
+    balance = np.median(bgr[::3, ::3].reshape(-1, 3), axis=0)
+    gain = float(balance.mean()) / np.maximum(balance, 1.0)
+    bgr = cv2.multiply(bgr, (*gain.tolist(), 0.0))
+    first = greenness(bgr)
+    rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
+    rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
+    exg = greenness(cv2.GaussianBlur(flat_field(bgr, rough, params.pixel_m), (3, 3), 0))
+    # Otsu splits two classes; with two plants of different greens it splits the backdrop
+    # from the greener one and loses the other. Whatever stands clearly out of the
+    # backdrop's own noise is plant, so the threshold never exceeds that level.
+    sample = exg[::3, ::3]
+    centre = float(np.median(sample))
+    noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
+    threshold = max(min(_otsu(exg), centre + NOISE_SIGMAS * noise), params.min_greenness)
+    low = max(0.5 * threshold, params.min_greenness)
+    mask = apply_hysteresis_threshold(exg, low, threshold).astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    min_px = params.min_area_m2 / params.pixel_m ** 2
+    small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] < min_px) + 1
+    specks = int(stats[small, cv2.CC_STAT_AREA].sum())
+    keep = np.ones(count, bool)
+    keep[0] = False
+    keep[small] = False
+    plant = keep[labels]
+    inside = plant.astype(np.uint8)
+    contrast = cv2.mean(exg, inside)[0] - cv2.mean(exg, 1 - inside)[0] if inside.any() else 0.0
+    if contrast < params.min_contrast:
+        plant[:] = False
+    return Segmentation(plant, float(threshold), contrast, specks)
+
+
+def _otsu(exg: np.ndarray) -> float:
+    """Otsu's threshold of an ExG image (OpenCV, on ExG scaled to 8 bits)."""
+    scaled = np.clip((exg + 0.5) * EXG_SCALE, 0, 255).astype(np.uint8)
+    level, _ = cv2.threshold(scaled, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    return float(level) / EXG_SCALE - 0.5

@@ -1,0 +1,7 @@
+"""The photo twin: simulated chambers drawn as a camera would see them (tests, benchmark,
+and a capture source, so the whole loop runs without hardware)."""
+
+from growspace_camera.twin.draw import PhotoTwin, TwinJitter, TwinPhoto
+from growspace_camera.twin.pose import look_at_plane, Pose
+
+__all__ = ['PhotoTwin', 'TwinJitter', 'TwinPhoto', 'Pose', 'look_at_plane']

@@ -1,0 +1,119 @@
+"""Mask -> plants, nodes and tips: known answers on tiny masks drawn here.
+
+The masks are 2 mm pixels over a 0.2 m square (100 x 100), stems drawn with OpenCV; node
+spacing 0.05 m (the first node 0.05 m above the floor), so every answer is a few round
+numbers.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from growspace_camera.errors import CameraError, NO_PLANT
+from growspace_camera.nodes import measure_tree
+from growspace_camera.segment import Grid
+from growspace_camera.skeleton import TreeParams
+
+GRID = Grid(0.2, 0.2, 0.002)
+SPACING = 0.05
+
+
+def mask_of(*polylines: list[tuple[float, float]], width_m: float = 0.012) -> np.ndarray:
+    """A mask with each polyline (x, z in m) drawn as a stem ``width_m`` wide."""
+    mask = np.zeros(GRID.shape, np.uint8)
+    for line in polylines:
+        points = np.array([((x / GRID.pixel_m - 0.5) * 16, ((0.2 - z) / GRID.pixel_m - 0.5)
+                            * 16) for x, z in line], np.int32)
+        cv2.polylines(mask, [points], False, 1, int(round(width_m / GRID.pixel_m)),
+                      cv2.LINE_8, 4)
+    return mask.astype(bool)
+
+
+def tree_of(mask: np.ndarray, **params):
+    return measure_tree(mask, GRID, SPACING, SPACING, TreeParams(**params))
+
+
+def near(points: np.ndarray, point: tuple[float, float], tol: float = 0.004) -> bool:
+    return bool(np.any(np.hypot(*(np.asarray(points) - point).T) < tol))
+
+
+def cap(start: tuple[float, float], end: tuple[float, float],
+        width_m: float = 0.012) -> tuple[float, float]:
+    """Where a drawn stem's mask ends: OpenCV's round cap reaches half its width beyond."""
+    d = np.subtract(end, start)
+    return tuple(np.add(end, 0.5 * width_m * d / np.hypot(*d)))
+
+
+def test_a_straight_stem_is_one_plant_with_nodes_every_spacing_and_its_tip():
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.15)]))
+    assert tree.plants == 1 and tree.tips.size == 1 and tree.tips_pruned == 0
+    assert tree.nodes[0] == pytest.approx((0.1, 0.0), abs=0.002)  # the root, on the floor
+    for z in (0.05, 0.10):
+        assert near(tree.nodes, (0.1, z))
+    assert tree.nodes[tree.tips[0]] == pytest.approx(cap((0.1, 0.1), (0.1, 0.15)), abs=0.003)
+    assert tree.parent[0] == -1 and np.all(tree.parent[1:] < np.arange(1, len(tree.parent)))
+    assert set(tree.plant) == {0}
+
+
+def test_a_corner_gets_its_node_where_the_stem_turns():
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.16, 0.13)]))
+    assert tree.tips.size == 1
+    assert near(tree.nodes, (0.1, 0.1), 0.003)  # the corner, not a rounded-off point
+    assert tree.nodes[tree.tips[0]] == pytest.approx(cap((0.1, 0.1), (0.16, 0.13)), abs=0.003)
+
+
+def test_a_fork_has_two_tips_and_one_shared_node():
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.05, 0.15)], [(0.1, 0.1), (0.15, 0.15)]))
+    assert tree.plants == 1 and tree.tips.size == 2
+    tips = tree.nodes[tree.tips]
+    assert near(tips, cap((0.1, 0.1), (0.05, 0.15)))
+    assert near(tips, cap((0.1, 0.1), (0.15, 0.15)))
+    fork = [i for i in range(len(tree.parent)) if np.count_nonzero(tree.parent == i) == 2]
+    assert len(fork) == 1 and tree.nodes[fork[0]] == pytest.approx((0.1, 0.1), abs=0.005)
+
+
+def test_a_short_nub_is_a_pruned_spur_not_a_tip():
+    stem = mask_of([(0.1, 0.0), (0.1, 0.15)], width_m=0.02)
+    stem |= mask_of([(0.1, 0.08), (0.118, 0.085)], width_m=0.006)  # sticks out 8 mm
+    tree = tree_of(stem)
+    assert tree.tips.size == 1 and tree.tips_pruned >= 1
+    assert tree_of(stem, spur_m=0.0, spur_radii=0.0).tips.size == 2  # unpruned: a tip
+
+
+def test_two_stems_are_two_plants_left_to_right():
+    tree = tree_of(mask_of([(0.15, 0.0), (0.15, 0.12)],
+                           [(0.04, 0.0), (0.04, 0.05), (0.06, 0.1)]))
+    assert tree.plants == 2
+    assert tree.nodes[0, 0] == pytest.approx(0.04, abs=0.003)  # plant 0 is the left one
+    assert tree.nodes[1, 0] == pytest.approx(0.15, abs=0.003)
+    tips = tree.nodes[tree.tips]
+    assert sorted(tree.plant[tree.tips]) == [0, 1]
+    assert near(tips, cap((0.04, 0.05), (0.06, 0.1)))
+    assert near(tips, cap((0.15, 0.0), (0.15, 0.12)))
+
+
+def test_crossing_branches_still_make_a_tree_of_one_plant():
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.06), (0.04, 0.16)],
+                           [(0.1, 0.06), (0.16, 0.1), (0.06, 0.12)]))
+    assert tree.plants == 1
+    assert np.all(tree.parent[1:] < np.arange(1, len(tree.parent)))
+    assert near(tree.nodes[tree.tips], cap((0.1, 0.06), (0.04, 0.16)))
+
+
+def test_a_loose_piece_of_plant_is_counted_not_attached():
+    mask = mask_of([(0.1, 0.0), (0.1, 0.1)]) | mask_of([(0.03, 0.15), (0.07, 0.17)])
+    tree = tree_of(mask)
+    assert tree.plants == 1 and tree.unattached_px > 10
+    assert not near(tree.nodes, (0.05, 0.16), 0.02)
+
+
+@pytest.mark.parametrize('mask, match', [
+    (np.zeros(GRID.shape, bool), 'the mask is empty'),
+    (mask_of([(0.05, 0.1), (0.15, 0.12)]), 'no stem reaches the floor'),
+])
+def test_no_plant_is_an_error_not_an_empty_answer(mask, match):
+    with pytest.raises(CameraError, match=match) as e:
+        tree_of(mask)
+    assert e.value.code == NO_PLANT

@@ -1,0 +1,226 @@
+"""The camera pipeline's steps on files and arrays: markers, plane fit, exposure, segmentation,
+the photo twin, and a whole photo against the simulator it shows. No device is ever opened.
+
+The twin draws its photos with its own code (a pinhole pose, a millimetre canvas), so these
+tests check the pipeline against an independent picture of the truth.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+
+from growspace_camera.calibration import Calibrator, fit_plane
+from growspace_camera.errors import CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
+from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
+from growspace_camera.measure import Target
+from growspace_camera.pipeline import overlay, Pipeline
+from growspace_camera.segment import exposure, SegmentParams
+from growspace_camera.sheet import sheet_pages
+from growspace_camera.twin import look_at_plane, PhotoTwin, TwinJitter
+from growspace_sim.core.config import SimConfig
+from growspace_sim.simulation import Simulation
+
+LAYOUT = MarkerLayout()
+
+
+@pytest.fixture(scope='module')
+def chamber():
+    """A control chamber grown 12 steps by its oracle (module-wide: photos only read it)."""
+    cfg = SimConfig(challenge='control', setting='hard')
+    sim = Simulation(cfg)
+    sim.reset(seed=11)
+    oracle = cfg.task.oracle()
+    for _ in range(12):
+        sim.apply_discrete(oracle.act(sim.chamber))
+        outcome = sim.step()
+    return SimpleNamespace(sim=sim, cfg=cfg, reward=outcome.reward)
+
+
+@pytest.fixture(scope='module')
+def photo(chamber):
+    return PhotoTwin(LAYOUT).photo(chamber.sim.chamber, seed=4)
+
+
+def measure(pipeline: Pipeline, chamber, bgr: np.ndarray):
+    c = chamber.sim.chamber
+    return pipeline.measure(bgr, chamber.cfg, c.light.copy(), Target(c.target), c.steps)
+
+
+# --- markers and the plane -------------------------------------------------------------------
+
+def square_pose():
+    return look_at_plane((1280, 960), 60.0, (0.42, 0.42), 1.6, yaw_deg=3.0, pitch_deg=-2.0,
+                         roll_deg=1.0)
+
+
+def detections(pose, layout: MarkerLayout = LAYOUT, ids=None) -> list[Detection]:
+    return [Detection(i, pose.project(layout.corners(k))) for k, i in enumerate(layout.ids)
+            if ids is None or i in ids]
+
+
+def test_plane_fit_known_answer():
+    pose = square_pose()
+    fit = fit_plane(LAYOUT, detections(pose))
+    assert fit.rms_error_m < 1e-7  # metres: exact up to rounding
+    points = np.array([(0.0, 0.0), (0.84, 0.0), (0.3, 0.7), (0.61, 0.13)])
+    assert np.allclose(fit.plane_points(pose.project(points)), points, atol=1e-7)
+    assert np.allclose(fit.photo_points(points), pose.project(points), atol=1e-6)
+    # pixels per metre: focal length over distance, at the aim point
+    assert fit.px_per_m((0.42, 0.42)) == pytest.approx(pose.focal_px / 1.6, rel=0.02)
+
+
+def test_calibrator_holds_the_last_fit_only_while_the_seen_markers_agree():
+    pose = square_pose()
+    cal = Calibrator(LAYOUT)
+    with pytest.raises(CameraError, match='a first fit needs all four') as e:
+        cal.update(detections(pose, ids=(0, 1, 2)))
+    assert e.value.code == MARKERS
+    fresh = cal.update(detections(pose))
+    assert not fresh.held and fresh.age == 0
+    held = cal.update(detections(pose, ids=(0, 1, 3)))
+    assert held.held and held.age == 1 and held.fit is fresh.fit and held.seen == (0, 1, 3)
+    moved = look_at_plane((1280, 960), 60.0, (0.45, 0.42), 1.6)
+    with pytest.raises(CameraError, match='the camera has moved') as e:
+        cal.update(detections(moved, ids=(0, 1)))
+    assert e.value.code == FIT
+    with pytest.raises(CameraError, match='none is seen') as e:
+        cal.update([])
+    assert e.value.code == MARKERS
+
+
+def test_markers_printed_at_another_size_are_refused_not_fitted():
+    pose = square_pose()
+    printed = MarkerLayout(side=0.08)  # the layout file says 0.06 m
+    with pytest.raises(CameraError, match='do not sit where the layout says') as e:
+        Calibrator(LAYOUT).update(detections(pose, printed))
+    assert e.value.code == FIT
+
+
+def test_markers_are_found_in_a_twin_photo_where_the_twin_drew_them(photo):
+    found = MarkerDetector(LAYOUT).detect(to_gray(photo.bgr))
+    assert [d.marker_id for d in found] == list(LAYOUT.ids)
+    for d in found:
+        truth = photo.pose.project(LAYOUT.corners(LAYOUT.ids.index(d.marker_id)))
+        assert np.abs(d.corners - truth).max() < 1.0  # px
+
+
+def test_the_opencv_4_6_functional_api_is_used_where_there_is_no_arucodetector(photo):
+    calls = []
+    aruco = cv2.aruco
+
+    def detect_markers(gray, dictionary, parameters):
+        calls.append(parameters)
+        return aruco.ArucoDetector(dictionary, parameters).detectMarkers(gray)
+
+    old_api = SimpleNamespace(  # what OpenCV 4.6's cv2.aruco offers (no ArucoDetector)
+        DICT_4X4_50=aruco.DICT_4X4_50, getPredefinedDictionary=aruco.getPredefinedDictionary,
+        DetectorParameters_create=aruco.DetectorParameters, detectMarkers=detect_markers)
+    found = MarkerDetector(LAYOUT, aruco=old_api).detect(to_gray(photo.bgr))
+    assert [d.marker_id for d in found] == list(LAYOUT.ids) and len(calls) == 1
+    assert calls[0].perspectiveRemovePixelPerCell == 8
+
+
+@pytest.mark.parametrize('change, match', [
+    ({'ids': (0, 1, 2, 2)}, '4 different ids'),
+    ({'ids': (0, 1, 2, 50)}, 'in 0..49'),
+    ({'dictionary': 'DICT_ARUCO'}, 'marker_dictionary must be one of'),
+    ({'side': 0.0}, r'marker_side must be in \[0.005, 1.0\] m, got 0.0'),
+    ({'centres': ((0.0, 0.0),) * 4}, 'much larger than a marker'),
+])
+def test_bad_marker_layouts_are_refused_with_the_field(change, match):
+    with pytest.raises(ValueError, match=match):
+        MarkerLayout(**change)
+
+
+def test_marker_sheet_draws_every_black_cell_at_its_printed_size():
+    (page,) = sheet_pages(LAYOUT)
+    assert 'width="210mm" height="297mm"' in page
+    black = sum(int(LAYOUT.bits(i).sum()) for i in LAYOUT.ids)
+    assert page.count('width="10.0000" height="10.0000"') == black  # 60 mm / 6 cells
+    assert page.count('centre at x = ') == 4 and 'this bar must measure 100 mm' in page
+
+
+# --- exposure and segmentation ---------------------------------------------------------------
+
+def test_exposure_refuses_black_and_overexposed_photos():
+    params = SegmentParams()
+    with pytest.raises(CameraError, match='too dark') as e:
+        exposure(np.full((90, 160), 5, np.uint8), params)
+    assert e.value.code == EXPOSURE
+    with pytest.raises(CameraError, match='overexposed'):
+        exposure(np.full((90, 160), 255, np.uint8), params)
+    assert exposure(np.full((90, 160), 128, np.uint8), params).mean == pytest.approx(128 / 255)
+
+
+@pytest.mark.parametrize('level', [0, 255])
+def test_black_or_white_photo_gives_an_error_and_no_reward(chamber, level):
+    m = measure(Pipeline(), chamber, np.full((1080, 1920, 3), level, np.uint8))
+    assert not m.ok and m.error.code == EXPOSURE
+    assert m.reward == 0.0 and m.observation is None and m.state is None
+
+
+def test_an_empty_pot_is_no_plant_not_a_reward(chamber):
+    empty = PhotoTwin(LAYOUT).photo(chamber.sim.chamber, seed=4, plant=False)
+    m = measure(Pipeline(), chamber, empty.bgr)
+    assert not m.ok and m.error.code == NO_PLANT, m.error
+    assert m.reward == 0.0 and m.confidence.plant_pixels == 0
+    assert list(m.confidence.markers_seen) == list(LAYOUT.ids)  # the photo itself was fine
+
+
+# --- the twin and a whole photo --------------------------------------------------------------
+
+def test_twin_photos_are_deterministic_by_seed(chamber):
+    twin = PhotoTwin(LAYOUT, size=(640, 360))
+    a = twin.photo(chamber.sim.chamber, seed=3)
+    b = twin.photo(chamber.sim.chamber, seed=3)
+    c = twin.photo(chamber.sim.chamber, seed=5)
+    assert a.jpeg == b.jpeg and a.conditions == b.conditions
+    assert a.jpeg != c.jpeg and a.conditions != c.conditions
+
+
+def test_twin_jitter_ranges_are_respected(chamber):
+    jitter = TwinJitter(jpeg_quality=(60, 60), lamp=(0.0, 0.0), blur_px=(0.5, 0.5))
+    shot = PhotoTwin(LAYOUT, jitter, size=(640, 360)).photo(chamber.sim.chamber, seed=9)
+    assert shot.conditions['jpeg_quality'] == 60 and shot.conditions['lamp'] == pytest.approx(
+        0.0, abs=0.07)  # the white light's own gradient and balance only
+    assert shot.bgr.shape == (360, 640, 3)
+
+
+def test_a_twin_photo_gives_the_simulators_reward_tips_and_plant(chamber, photo):
+    m = measure(Pipeline(), chamber, photo.bgr)
+    assert m.ok, m.error
+    # The reward is steep near the target (here 2.9 cm away): compare the distance it reads.
+    assert abs(m.state.nearest[0] - chamber.sim.chamber.state.nearest[0]) < 0.005
+    assert abs(m.reward - chamber.reward) < 0.1
+    truth = np.concatenate(chamber.sim.chamber.tip_positions())
+    seen = m.tree.nodes[m.tree.tips]
+    d = np.hypot(truth[:, None, 0] - seen[None, :, 0], truth[:, None, 1] - seen[None, :, 1])
+    assert (d.min(axis=1) < 0.01).mean() >= 0.8
+    a, b = chamber.sim.observe()[..., 1] > 0, m.observation[..., 1] > 0
+    assert np.count_nonzero(a & b) / np.count_nonzero(a | b) > 0.75
+    # red and blue: the task's target and the light given, drawn as the simulator draws them
+    assert np.array_equal(m.observation[..., [0, 2]], chamber.sim.observe()[..., [0, 2]])
+    c = m.confidence
+    assert c.markers_seen == LAYOUT.ids and not c.fit_held and c.tips == len(seen)
+    picture = overlay(photo.bgr, m)
+    assert picture.shape == (540, 960, 3)
+
+
+def test_hidden_markers_after_a_good_photo_hold_the_fit_and_say_so(chamber, photo):
+    pipeline = Pipeline()
+    twin = PhotoTwin(LAYOUT, TwinJitter(hfov_deg=(60.0, 60.0), fill=(1.1, 1.1), tilt_deg=0.0,
+                                        roll_deg=0.0, aim_m=0.0))
+    c = chamber.sim.chamber
+    first = measure(pipeline, chamber, twin.photo(c, seed=1).bgr)
+    assert first.ok and not first.confidence.fit_held
+    hidden = measure(pipeline, chamber, twin.photo(c, seed=2, hidden=(2, 3)).bgr)
+    assert hidden.ok, hidden.error
+    assert hidden.confidence.fit_held and hidden.confidence.fit_age == 1
+    assert hidden.confidence.markers_seen == (0, 1)
+    assert abs(hidden.state.nearest[0] - c.state.nearest[0]) < 0.005
+    fresh = measure(Pipeline(), chamber, twin.photo(c, seed=2, hidden=(2, 3)).bgr)
+    assert not fresh.ok and fresh.error.code == MARKERS and fresh.reward == 0.0
