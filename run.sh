@@ -165,7 +165,8 @@ case "$cmd" in
       tests/test_core.py tests/test_kernels.py tests/test_envs.py tests/test_vector_env.py \
       tests/test_digits.py tests/test_agents.py \
       tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
-      tests/test_bridge.py tests/test_view.py tests/test_view_ros.py tests/test_bag_damage.py ;;
+      tests/test_bridge.py tests/test_view.py tests/test_view_ros.py tests/test_bag_damage.py \
+      tests/test_camera_vision.py tests/test_camera_skeleton.py ;;
   help|-h|--help) sed -n '2,9p' "$0" ;;
   *) sed -n '2,9p' "$0" >&2; echo "run.sh: unknown subcommand '$cmd'" >&2; exit 2 ;;
 esac

@@ -423,8 +423,10 @@ def test_homing_waits_for_the_estop_latch_to_be_released(tmp_path) -> None:
         assert '$H' not in rig.grbl.lines
         assert rig.run_until(lambda: rig.controller.phase == 'ready' and rig.controller.status)
         assert call(rig, 'gantry/unlock').success  # releases the latch and sends $X
-        assert rig.run_until(lambda: rig.grbl.state == 'Idle')
-        assert call(rig, 'gantry/home').success
+        assert rig.run_until(lambda: rig.grbl.state == 'Idle'
+                             and not rig.controller.counter.pending)  # $X answered
+        homed = call(rig, 'gantry/home')
+        assert homed.success, (homed.message, rig.controller.phase, rig.controller.status)
         assert rig.run_until(lambda: rig.node.safety.position_known)  # homing establishes it
         assert rig.grbl.lines.count('$H') == 1
     finally:

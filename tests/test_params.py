@@ -168,10 +168,11 @@ def test_the_readme_table_is_the_declaration() -> None:
 
 
 def test_every_declaration_says_what_it_means() -> None:
+    from growspace_camera.settings import CameraParams
     from growspace_gantry.settings import GantryParams
     from growspace_sim.node.view_node import ViewParams
 
-    for cls in (SimConfig, NodeParams, GantryParams, ViewParams):
+    for cls in (SimConfig, NodeParams, GantryParams, ViewParams, CameraParams):
         for field, declaration in schema.declared(cls):
             assert declaration.doc and not declaration.doc.endswith('.'), field.name
             if isinstance(field.default, float):

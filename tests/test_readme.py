@@ -40,6 +40,10 @@ WHERE = [
     (r'^growspace-replay play run\.mcap --step-period ', 'needs a lockstep node: '
                                                          'tests/test_replay_steps.py plays it'),
     (r'^(sim_node|view_node) --ros-args', RUN),
+    (r'^camera_node .*source:=/dev/video', 'needs a camera (V4L2): tests read photos and videos '
+                                          'instead (tests/test_camera_*.py)'),
+    (r'^camera_node --ros-args', RUN),
+    (r'^growspace-camera ', RUN),
     (r'^python -m growspace_sim\.tools\.pub ', RUN),
     (r'^growspace-replay ', RUN),
     (r'^growspace-sweep .*--address HEAD_IP', 'needs a second machine (walked by hand: README)'),
@@ -63,7 +67,7 @@ def bash_lines(path: Path) -> list[str]:
             continue
         if not block or line.lstrip().startswith('#'):
             continue
-        joined += line.split('  #')[0].rstrip()
+        joined += re.split(r'\s#\s', line)[0].rstrip()
         if joined.endswith('\\'):
             joined = joined[:-1] + ' '
             continue
@@ -176,3 +180,27 @@ def test_no_page_names_a_script_or_file_that_is_not_here(page: Path) -> None:
                     and not (ROOT / word).exists() and how(line) == RUN:
                 missing.append(f'{line}: {word}')
     assert not missing, missing
+
+
+def test_the_camera_lines_run_as_written(tmp_path) -> None:
+    # In page order: the sheet, twin photos into shots/, measuring them, then camera_node on the
+    # twin and on those photos (started, up for a few seconds, stopped by SIGINT).
+    lines = [line for _, line in documented() if how(line) == RUN and (
+        line.startswith('growspace-camera ') or line.startswith('camera_node '))]
+    tools = [line for line in lines if line.startswith('growspace-camera ')]
+    nodes = [line for line in lines if line.startswith('camera_node ')]
+    assert len(tools) >= 3 and len(nodes) >= 2
+    for line in sorted(tools, key=lambda x: (' measure ' in x, x)):  # photos before measuring
+        out = shell(line, cwd=tmp_path)
+        assert out.returncode == 0, (line, out.stdout[-2000:], out.stderr[-2000:])
+    assert (tmp_path / 'sheet.svg').is_file() and list((tmp_path / 'shots').glob('*.jpg'))
+    for line in nodes:
+        node = subprocess.Popen(['bash', '-c', f'eval "$(./run.sh env)" && cd {tmp_path} && '
+                                               f'exec {line}'],
+                                cwd=ROOT, env=child_env(), stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        time.sleep(6.0)
+        alive = node.poll() is None
+        node.send_signal(2)
+        log = node.communicate(timeout=60)[0]
+        assert alive and node.returncode == 0 and 'Traceback' not in log, (line, log[-3000:])

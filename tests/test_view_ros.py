@@ -75,7 +75,15 @@ def test_view_node_publishes_markers_and_image_when_subscribed(chamber: dict) ->
     assert client.spin_until(lambda: client.node.count_publishers(
         f'{NAMESPACE}/plant/markers') == 1 and client.node.count_subscribers(
         f'{NAMESPACE}/step_result') >= 2), 'view_node did not appear'
-    client.drain(0.5)
+    # The view publishes only while it sees a subscriber, and discovery is not symmetric: ours
+    # may see its publisher before it sees our readers. Step until its frames reach us.
+    client.reset(1000, has_seed=True, seed=3)
+    for step_id in range(1, 20):
+        client.step(step_id, 2)
+        if client.spin_until(lambda: got['markers'] and got['images'], timeout=0.5):
+            break
+    got['markers'].clear()
+    got['images'].clear()
     reset = client.reset(1, has_seed=True, seed=11)
     step = client.step(1, 0)
     assert client.spin_until(lambda: len(got['markers']) >= 2 and len(got['images']) >= 2)

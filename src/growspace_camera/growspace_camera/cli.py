@@ -50,8 +50,10 @@ def main(argv: list[str] | None = None) -> int:
     for p in (markers, twin, measure):
         p.add_argument('--markers', default='', help='marker layout YAML (default: installed)')
     for p in (twin, measure):
-        p.add_argument('--challenge', default='control', choices=tasks.names())
-        p.add_argument('--setting', default='easy', choices=('easy', 'hard'))
+        p.add_argument('--challenge', default='control',
+                       help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
+                            'of your own (default control)')
+        p.add_argument('--setting', default='easy', help='a setting of the challenge')
         p.add_argument('--seed', type=int, default=0)
     args = parser.parse_args(argv)
     try:
@@ -72,6 +74,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _twin(layout, cfg: SimConfig, seed: int, steps: int, out: Path) -> int:  # noqa: ANN001
+    if cfg.task.oracle is None:
+        print(f'growspace-camera: the {cfg.challenge} challenge has no oracle to steer the '
+              f"twin's episode", file=sys.stderr)
+        return 2
     out.mkdir(parents=True, exist_ok=True)
     sim = Simulation(cfg)
     sim.reset(seed=seed)

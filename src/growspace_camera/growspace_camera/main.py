@@ -17,7 +17,7 @@ from typing import Any
 from growspace_camera.capture import Camera, DeviceSettings, open_source
 from growspace_camera.node import CameraNode
 from growspace_camera.pipeline import Pipeline
-from growspace_camera.settings import CAMERA_BOUNDS, CameraParams, load_layout, SOURCE_RULE
+from growspace_camera.settings import CameraParams, load_layout
 from growspace_camera.twin.source import TwinSource
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
@@ -58,8 +58,7 @@ def build(transport: Any, values: dict[str, Any]) -> CameraNode:
 def run(argv: Sequence[str], stop: threading.Event) -> int:
     """Run the node until SIGINT/SIGTERM or ``stop``."""
     def start(transport: Any) -> CameraNode:
-        specs = params.specs_of(SimConfig, CameraParams, bounds=CAMERA_BOUNDS,
-                                rules={'source': SOURCE_RULE}, runtime=False)
+        specs = params.specs_of(SimConfig, CameraParams, runtime=False)
         values, unknown = transport.declare_parameters(specs, params.check_type)
         if unknown:
             transport.logger.warn('params:unknown', f'ignored unknown parameter(s) '

@@ -138,7 +138,7 @@ def plant_msg(m: Measurement, stamp_ns: int, step_id: int, frame_id: str) -> Any
 def observation_msg(m: Measurement, stamp_ns: int, frame_id: str) -> Any:
     """The rgb8 observation (an empty image when the photo was not measured)."""
     if not m.ok or m.observation is None:
-        return types.new(convert.IMAGE, header=convert.header(stamp_ns, frame_id),
+        return types.new(types.IMAGE, header=convert.header(stamp_ns, frame_id),
                          encoding='rgb8')
     return convert.image_msg(m.observation, stamp_ns, frame_id)
 

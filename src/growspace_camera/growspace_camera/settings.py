@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 import os
-import re
 from typing import Any
 
 import yaml
@@ -19,84 +18,82 @@ from growspace_camera.markers import MarkerLayout
 from growspace_camera.pipeline import PipelineParams
 from growspace_camera.segment import SegmentParams
 from growspace_camera.skeleton import TreeParams
-from growspace_sim.core.config import Bounds
-from growspace_sim.node.params import check_bounds, MODES, ParamError
+from growspace_sim.core.schema import Bounds, param
+from growspace_sim.node.params import (
+    check, frame_param, mode_param, ParamError, seed_param)
 from growspace_sim.ros.convert import MAX_SEED
 
 _FRACTION = Bounds(0.0, 1.0, low_open=True)
-# The ranges of CameraParams' number fields: what validation checks and ROS parameters show.
-CAMERA_BOUNDS = {
-    'width': Bounds(16, 8192, integer=True), 'height': Bounds(16, 8192, integer=True),
-    'fps': Bounds(0.0, 240.0, low_open=True), 'exposure': Bounds(1.0, 1e6, sentinel=-1),
-    'white_balance_k': Bounds(1000, 15000, integer=True, sentinel=0),
-    'flush_frames': Bounds(0, 30, integer=True), 'rate_hz': Bounds(0.0, 100.0, low_open=True),
-    'retry_max_s': Bounds(0.5, 3600.0), 'jpeg_quality': Bounds(10, 100, integer=True),
-    'twin_seed': Bounds(0, MAX_SEED, integer=True),
-    'seed': Bounds(0, MAX_SEED, integer=True, sentinel=-1),
-    'pixel_size_m': Bounds(0.0005, 0.02), 'min_greenness': Bounds(0.0, 1.0),
-    'min_contrast': Bounds(0.0, 1.0), 'min_area_m2': Bounds(0.0, 0.01),
-    'dark_level': Bounds(0.0, 1.0), 'max_saturated': _FRACTION,
-    'base_band_m': Bounds(0.002, 0.5), 'spur_m': Bounds(0.0, 0.5),
-    'spur_radii': Bounds(0.0, 20.0), 'corner_deg': Bounds(1.0, 90.0),
-    'min_stem_m': Bounds(0.0, 1.0),
-    'max_fit_error_m': Bounds(0.0001, 0.1), 'segmentation_scale': Bounds(0.05, 1.0),
-}
 SOURCE_RULE = ("'twin', a V4L2 device (/dev/videoN or its index), a video file, a folder of "
                "photos or a glob such as 'shots/*.jpg'")
 
 
 @dataclass(frozen=True)
 class CameraParams:
-    """Settings of camera_node, validated on construction (ROS parameters of the same names)."""
+    """Settings of camera_node, validated on construction (ROS parameters of the same names),
+    each declared once (``growspace_sim.core.schema.param``)."""
 
-    mode: str = 'lockstep'  # lockstep: photos on camera/capture requests; realtime: on a timer
-    source: str = 'twin'  # 'twin', /dev/videoN or its index, a video file, a folder or a glob
-    width: int = 1920  # px, asked of a device (the log says what it accepted)
-    height: int = 1080  # px
-    fps: float = 30.0  # frames per second asked of a device
-    exposure: float = -1.0  # device exposure (V4L2 exposure_time_absolute, 100 us); -1 = auto
-    white_balance_k: int = 0  # device white balance [K]; 0 = auto (both warned: lock them)
-    flush_frames: int = 2  # frames dropped before a photo (a device buffers stale ones)
-    loop: bool = True  # a video file or a folder of photos starts again at its end
-    rate_hz: float = 1.0  # Hz; photos per second in realtime mode
-    retry_max_s: float = 10.0  # s; longest wait between two tries to reopen a lost source
-    jpeg_quality: int = 90  # JPEG quality of camera/photo when the source gives no JPEG
-    twin_seed: int = 0  # seed of the twin source's photos (poses, light, noise)
-    seed: int = -1  # seed of the first episode's target when no chamber/config came; -1 = none
-    markers: str = ''  # marker layout YAML; empty = the installed config/markers.yaml
-    pixel_size_m: float = 0.002  # side of a rectified pixel on the plant plane [m]
-    min_greenness: float = 0.06  # lowest excess-green threshold (an empty pot stays empty)
-    min_contrast: float = 0.08  # plant minus backdrop greenness below this: no plant
-    min_area_m2: float = 0.0001  # smaller specks of green are not plant [m^2]
-    dark_level: float = 0.08  # a photo darker than this mean grey level is refused [0-1]
-    max_saturated: float = 0.2  # a photo with more clipped pixels is refused [0-1]
-    base_band_m: float = 0.03  # skeleton this close to the floor is a stem base [m]
-    spur_m: float = 0.015  # end branches shorter than this are thinning spurs [m]
-    spur_radii: float = 2.0  # ... or shorter than this many stem radii
-    corner_deg: float = 15.0  # a skeleton turning this much has a node there [deg]
-    min_stem_m: float = 0.05  # a stem base carrying less plant than this is a speck [m]
-    max_fit_error_m: float = 0.005  # largest RMS marker-corner error of a plane fit [m]
-    segmentation_scale: float = 0.5  # size of camera/segmentation relative to the photo
-    frame_id: str = 'chamber'  # frame of plant state and measurements
-    image_frame_id: str = 'chamber_camera'  # frame of the observation image
-    photo_frame_id: str = 'camera_optical'  # frame of the photos (the camera's optical frame)
+    mode: str = mode_param('lockstep: photos on camera/capture requests; realtime: on a timer')
+    source: str = param('twin', 'where photos come from', pattern=r'\S.*',
+                        pattern_doc=SOURCE_RULE)
+    width: int = param(1920, 'photo width asked of a device (the log says what it accepted)',
+                       unit='px', bounds=Bounds(16, 8192, integer=True))
+    height: int = param(1080, 'photo height asked of a device', unit='px',
+                        bounds=Bounds(16, 8192, integer=True))
+    fps: float = param(30.0, 'frames per second asked of a device', unit='Hz',
+                       bounds=Bounds(0.0, 240.0, low_open=True))
+    exposure: float = param(-1.0, 'device exposure (V4L2 exposure_time_absolute)',
+                            unit='100 us', bounds=Bounds(1.0, 1e6, sentinel=-1),
+                            rule='-1 = auto (warned: lock it)')
+    white_balance_k: int = param(0, 'device white balance', unit='K',
+                                 bounds=Bounds(1000, 15000, integer=True, sentinel=0),
+                                 rule='0 = auto (warned: lock it)')
+    flush_frames: int = param(2, 'frames dropped before a photo (a device buffers stale ones)',
+                              bounds=Bounds(0, 30, integer=True))
+    loop: bool = param(True, 'a video file or a folder of photos starts again at its end')
+    rate_hz: float = param(1.0, 'photos per second in realtime mode', unit='Hz',
+                           bounds=Bounds(0.0, 100.0, low_open=True))
+    retry_max_s: float = param(10.0, 'longest wait between two tries to reopen a lost source',
+                               unit='s', bounds=Bounds(0.5, 3600.0))
+    jpeg_quality: int = param(90, 'JPEG quality of camera/photo when the source gives no JPEG',
+                              bounds=Bounds(10, 100, integer=True))
+    twin_seed: int = param(0, "seed of the twin source's photos (poses, light, noise)",
+                           bounds=Bounds(0, MAX_SEED, integer=True))
+    seed: int = seed_param("seed of the first episode's target when no chamber/config came")
+    markers: str = param('', 'marker layout YAML; empty = the installed config/markers.yaml')
+    pixel_size_m: float = param(0.002, 'side of a rectified pixel on the plant plane', unit='m',
+                                bounds=Bounds(0.0005, 0.02))
+    min_greenness: float = param(0.06, 'lowest excess-green threshold (an empty pot stays '
+                                 'empty)', unit='1', bounds=Bounds(0.0, 1.0))
+    min_contrast: float = param(0.08, 'plant minus backdrop greenness below this: no plant',
+                                unit='1', bounds=Bounds(0.0, 1.0))
+    min_area_m2: float = param(0.0001, 'smaller specks of green are not plant', unit='m^2',
+                               bounds=Bounds(0.0, 0.01))
+    dark_level: float = param(0.08, 'a photo darker than this mean grey level is refused',
+                              unit='0-1', bounds=Bounds(0.0, 1.0))
+    max_saturated: float = param(0.2, 'a photo with more clipped pixels is refused',
+                                 unit='fraction', bounds=_FRACTION)
+    base_band_m: float = param(0.03, 'skeleton this close to the floor is a stem base',
+                               unit='m', bounds=Bounds(0.002, 0.5))
+    spur_m: float = param(0.015, 'end branches shorter than this are thinning spurs', unit='m',
+                          bounds=Bounds(0.0, 0.5))
+    spur_radii: float = param(2.0, '... or shorter than this many stem radii', unit='radii',
+                              bounds=Bounds(0.0, 20.0))
+    corner_deg: float = param(15.0, 'a skeleton turning this much has a node there',
+                              unit='deg', bounds=Bounds(1.0, 90.0))
+    min_stem_m: float = param(0.05, 'a stem base carrying less plant than this is a speck',
+                              unit='m', bounds=Bounds(0.0, 1.0))
+    max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',
+                                   unit='m', bounds=Bounds(0.0001, 0.1))
+    segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',
+                                      unit='1', bounds=Bounds(0.05, 1.0))
+    frame_id: str = frame_param('chamber', 'frame of plant state and measurements')
+    image_frame_id: str = frame_param('chamber_camera', 'frame of the observation image')
+    photo_frame_id: str = frame_param('camera_optical',
+                                      "frame of the photos (the camera's optical frame)")
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ParamError(f'mode must be one of {MODES}, got {self.mode!r}.')
-        if not isinstance(self.source, str) or not self.source.strip():
-            raise ParamError(f'source must be {SOURCE_RULE}, got {self.source!r}.')
-        check_bounds(self, CAMERA_BOUNDS)
-        for name in ('loop',):
-            if not isinstance(getattr(self, name), bool):
-                raise ParamError(f'{name} must be a bool, got {getattr(self, name)!r}.')
-        for name in ('frame_id', 'image_frame_id', 'photo_frame_id'):
-            value = getattr(self, name)
-            if not isinstance(value, str) or not re.fullmatch(r'[A-Za-z0-9_/]+', value):
-                raise ParamError(f'{name} must be a frame name of letters, digits, _ and /, '
-                                 f'got {value!r}.')
-        if not isinstance(self.markers, str):
-            raise ParamError(f'markers must be a path (string), got {self.markers!r}.')
+        check(self)
 
     def pipeline(self, layout: MarkerLayout) -> PipelineParams:
         """The pipeline's parameters."""

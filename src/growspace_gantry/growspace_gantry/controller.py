@@ -186,8 +186,10 @@ class GrblController:
             return f'not connected ({self.phase})'
         if self.settings.get(22) != 1.0:
             return f'homing is disabled on the controller ($22 = {self.settings.get(22)})'
-        if self.motion.jog is not None or self.counter.pending:
-            return 'the machine is busy; stop it first'
+        if self.motion.jog is not None:
+            return 'the machine is moving; stop it first'
+        if self.counter.pending:
+            return 'the controller has not answered the last line yet; try again'
         self.safe_stop()
         self._send_line('$H')
         return ''
