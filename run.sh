@@ -144,6 +144,10 @@ case "$cmd" in
   eval) setup "${MAIN[@]}"
         exec .venv/bin/python -m growspace_sim.tools.evaluate "$@" ;;
   sweep) setup "${MAIN[@]}"
+         # A cluster (--address, RAY_ADDRESS) is on the network, out of reach of a sandbox.
+         if [ -n "${RAY_ADDRESS:-}" ] || [[ " $* " == *" --address"* ]]; then
+           exec .venv/bin/python -m growspace_sim.sweep "$@"
+         fi
          sandboxed .venv/bin/python -m growspace_sim.sweep "$@" ;;
   test-compat)
     py312=

@@ -14,8 +14,10 @@ import importlib.util
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
+import tempfile
 import time
 from datetime import datetime
 from pathlib import Path
@@ -246,6 +248,75 @@ def test_a_local_ray_keeps_its_sessions_private_and_stops_completely():
     # Ray opens its own folders to everyone (0777); their parent lets nobody else in.
     info = root.parent.stat()
     assert info.st_uid == os.getuid() and info.st_mode & 0o077 == 0, oct(info.st_mode)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def test_an_address_where_nothing_answers_is_one_line_at_once(tmp_path, capsys):
+    port = _free_port()  # closed again: nothing listens there
+    assert sweep.main(['--agents', 'oracle', '--envs', 'GrowSpace/Control-Easy-v0',
+                       '--episodes', '2', '--out', str(tmp_path / 'out'), '--quiet',
+                       '--address', f'127.0.0.1:{port}']) == 1
+    assert capsys.readouterr().err == (
+        f'growspace-sweep: error: nothing answers at 127.0.0.1:{port} (Connection refused): '
+        f'is `ray start --head --port={port}` running there, and the port open to this '
+        'machine?\n')
+
+
+def test_a_token_cluster_from_ray_start_runs_trials_without_the_workspace(tmp_path):
+    """The README's cluster recipe on one loopback node: token authentication on, and a Ray
+    started without this workspace on its path (the sweep ships growspace_sim to it)."""
+    ray_cli = str(Path(sys.executable).with_name('ray'))
+    node_env = {name: value for name, value in child_env().items() if name != 'PYTHONPATH'}
+    node_env.update(HOME=str(tmp_path), RAY_AUTH_MODE='token', RAY_USAGE_STATS_ENABLED='0',
+                    RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER='0')  # every Ray server on 127.0.0.1
+    assert subprocess.run([sys.executable, '-c', 'import growspace_sim'], env=node_env,
+                          capture_output=True).returncode != 0  # the nodes cannot import it
+    subprocess.run([ray_cli, 'get-auth-token', '--generate'], env=node_env, check=True,
+                   capture_output=True)
+    port, log = _free_port(), tmp_path / 'head.log'
+    # Ray's socket paths must fit in 107 bytes: pytest's tmp_path is too long for them.
+    temp_dir = tempfile.TemporaryDirectory(prefix='gs-ray-')
+    with open(log, 'w') as out:
+        head = subprocess.Popen(
+            [ray_cli, 'start', '--head', '--block', f'--port={port}', '--num-cpus=1',
+             '--node-ip-address=127.0.0.1', '--include-dashboard=false',
+             f'--temp-dir={temp_dir.name}/ray'],
+            env=node_env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while 'Ray runtime started' not in log.read_text():
+            assert head.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
+            time.sleep(0.2)
+        driver_env = dict(child_env(), HOME=str(tmp_path), RAY_AUTH_MODE='token')
+        driver_env.pop('RAY_ADDRESS', None)
+        run = subprocess.run(
+            [sys.executable, '-m', 'growspace_sim.sweep', '--agents', 'oracle', '--envs',
+             'GrowSpace/Control-Easy-v0', '--episodes', '2', '--out', str(tmp_path / 'out'),
+             '--storage', str(tmp_path / 'storage'), '--quiet', '--no-plots',
+             '--address', f'127.0.0.1:{port}'],
+            env=driver_env, capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-3000:]
+        [trial] = _read_csv(tmp_path / 'out' / 'trials.csv')
+        assert (trial['key'], trial['status']) == ('oracle-control-easy-s0', 'ok')
+        [experiment] = (tmp_path / 'storage').iterdir()  # Tune's state, in --storage
+        assert list(experiment.glob('experiment_state-*.json'))
+        assert (experiment / 'oracle-control-easy-s0').is_dir()
+    finally:
+        head.terminate()  # `ray start --block` stops its node's processes on SIGTERM
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            head.wait(timeout=60)
+        deadline = time.monotonic() + 10.0
+        while _group(head.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = _group(head.pid)
+        _stop_group(head.pid)
+        temp_dir.cleanup()
+    assert left == [], 'Ray processes outlived ray start --block'
 
 
 def _finished(out: Path) -> dict[str, list[dict]]:

@@ -60,7 +60,14 @@ def main(argv: list[str] | None = None) -> int:
             parser.error('give a spec file, or --agents and --envs')
         out = Path(args.out or Path('runs') / 'sweeps' / spec.name)
         start = time.perf_counter()
-        ray_context = connect(args.address, args.workers)
+        try:
+            ray_context = connect(args.address, args.workers)
+        except ConnectionError as error:
+            # Ray's own error wraps the reason (e.g. a refused token) in a traceback's text.
+            cause = str(error.__cause__ or '').strip().splitlines()
+            print(f'growspace-sweep: error: {error}{f" ({cause[-1]})" if cause else ""}',
+                  file=sys.stderr)
+            return 1
         try:
             outcomes = run_sweep(spec, out, args.storage, args.workers, args.cpus_per_trial,
                                  args.gpus_per_trial, args.retry_errored,

@@ -118,7 +118,12 @@ def connect(address: str | None, workers: int | None) -> Any | None:
 
     Args:
         address: A cluster's address (``ray start --head`` prints it); ``None`` reads
-            ``RAY_ADDRESS`` and, without it, starts a local instance with no dashboard.
+            ``RAY_ADDRESS`` and, without it, starts a local instance with no dashboard. A
+            cluster's trials import the ``growspace_sim`` this process imported, which Ray
+            copies to each node (``py_modules``); its nodes need the same venv, not this
+            workspace. A cluster with token authentication needs ``RAY_AUTH_MODE=token`` and
+            its token here (``~/.ray/auth_token``, ``RAY_AUTH_TOKEN_PATH`` or
+            ``RAY_AUTH_TOKEN``).
         workers: CPUs of the local instance (default: all cores); unused for a cluster.
 
     Returns:
@@ -127,12 +132,16 @@ def connect(address: str | None, workers: int | None) -> Any | None:
         initialised in this process (then it is not this caller's to disconnect).
 
     Raises:
+        ConnectionError: Nothing answers at the cluster's address, or Ray could not join it
+            (e.g. it refused this machine's token).
         RuntimeError: A local instance would not stay on loopback (``ray`` was imported
             before this call; see the comment below).
     """
     os.environ['RAY_USAGE_STATS_ENABLED'] = '0'  # Ray's usage report would leave the machine
     address = address or os.environ.get('RAY_ADDRESS')
-    if not address:
+    if address:
+        _check_answers(address)
+    else:
         # On Linux, Ray 2.60 swaps a loopback node address for the machine's outward one (and
         # its servers then listen on every interface) unless multi-node clusters are disabled,
         # Ray's switch for Windows and macOS, read when ray is first imported. A local
@@ -143,7 +152,12 @@ def connect(address: str | None, workers: int | None) -> Any | None:
     if ray.is_initialized():
         return None
     if address:
-        return ray.init(address=address, log_to_driver=False)
+        # The trials run this package on every node: ship the driver's copy (Ray caches it by
+        # content) so that the other machines need only the venv, and run the same code.
+        import growspace_sim  # noqa: PLC0415
+        return ray.init(address=address, log_to_driver=False,
+                        runtime_env={'py_modules': [growspace_sim],
+                                     'excludes': ['__pycache__']})
     if ray.util.get_node_ip_address() != LOOPBACK:
         raise RuntimeError('ray was imported before growspace_sim.sweep.connect(), so a local '
                            'Ray would not stay on 127.0.0.1; set '
@@ -152,6 +166,23 @@ def connect(address: str | None, workers: int | None) -> Any | None:
         return ray.init(address='local', num_cpus=workers, include_dashboard=False,
                         _node_ip_address=LOOPBACK, _temp_dir=private_temp_dir(),
                         log_to_driver=False)
+
+
+def _check_answers(address: str, timeout: float = 10.0) -> None:
+    """Fail in seconds where Ray would not: nothing accepts a connection at ``host:port``.
+
+    Ray 2.60 keeps retrying such an address for over 12 minutes (measured), with a warning
+    every few seconds. Other forms (``auto``, ``ray://...``) are left to Ray.
+    """
+    host, _, port = address.rpartition(':')
+    if '://' in address or not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip('[]'), int(port)), timeout=timeout).close()
+    except OSError as error:
+        raise ConnectionError(
+            f'nothing answers at {address} ({error.strerror or error}): is `ray start --head '
+            f'--port={port}` running there, and the port open to this machine?') from None
 
 
 def disconnect() -> None:
@@ -253,7 +284,9 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
                                       failure_config=tune.FailureConfig(max_failures=0)))
     outcomes: dict[str, Outcome] = {}
     for result in tuner.fit():
-        trial = by_key[result.config['trial']]
+        # A trial whose worker could not even start (e.g. a node without a dependency) never
+        # reported, so it has no config; its folder is named by its key (_trial_key).
+        trial = by_key[result.config['trial'] if result.config else Path(result.path).name]
         if result.error is not None:
             outcomes[trial.key] = Outcome(trial, error=_error_text(result.error))
         elif result.checkpoint is not None:
