@@ -13,6 +13,7 @@ import pytest
 from growspace_sim.tools import bench
 
 from growspace_sim.agents import OracleAgent, play_episodes, RandomAgent
+from growspace_sim.agents.evaluation import episode_returns
 from growspace_sim.envs.registration import env_id
 from growspace_sim.tools import evaluate
 
@@ -89,3 +90,11 @@ def test_a_challenge_without_an_oracle_is_evaluated_without_one():
         assert '- (no oracle)' in evaluate.markdown([row])
     finally:
         unregister(task.name)
+
+
+def test_returns_are_added_in_step_order_on_every_python():
+    """Python 3.12's sum() compensates (1.0 here) and numpy's is pairwise; an agent adding its
+    rewards one by one gets 0.0, and so must every report of the episode (CI on 3.12 failed the
+    pinned return hash when a report used sum())."""
+    rows = np.array([[1e16, 1.0, -1e16], [0.1, 0.2, 0.3]])
+    assert episode_returns(rows).tolist() == [0.0, (0.1 + 0.2) + 0.3]

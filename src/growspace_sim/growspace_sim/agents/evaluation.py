@@ -44,10 +44,17 @@ class Episodes:
 
 
 def episode_returns(rewards: np.ndarray) -> np.ndarray:
-    """The return of each row of per-step rewards, summed step by step in order, as an agent
-    accumulates it (numpy's pairwise sum can differ in the last bit), so every report of the
-    same episodes prints the same number."""
-    return np.array([sum(row) for row in np.asarray(rewards, np.float64).tolist()], np.float64)
+    """The return of each row of per-step rewards, added step by step in order as an agent
+    accumulates it, so every report of the same episodes prints the same number on every
+    stack: numpy's pairwise sum and Python 3.12's ``sum`` (compensated) differ in the last bit.
+    """
+    returns = []
+    for row in np.asarray(rewards, np.float64).tolist():
+        total = 0.0
+        for reward in row:
+            total += reward
+        returns.append(total)
+    return np.array(returns, np.float64)
 
 
 def play_episodes(env: Any, agent: Agent, seeds: Iterable[int | None], *,

@@ -8,6 +8,7 @@ import math
 import os
 from typing import Any
 
+from growspace_sim.agents.evaluation import episode_returns
 from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.recording.scan import Damage
@@ -65,7 +66,8 @@ class Episode:
 
     @property
     def episode_return(self) -> float:
-        return float(sum(s.result.reward for s in self.stepped))
+        """Added step by step, as the agent did (the same number as growspace-eval's)."""
+        return float(episode_returns([[s.result.reward for s in self.stepped]])[0])
 
     @property
     def done(self) -> bool:
