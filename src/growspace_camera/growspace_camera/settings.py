@@ -9,7 +9,6 @@ prints the sheet from the same file the node reads.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-import os
 from typing import Any
 
 import yaml
@@ -22,6 +21,7 @@ from growspace_sim.core.schema import Bounds, param
 from growspace_sim.node.params import (
     check, frame_param, mode_param, ParamError, seed_param)
 from growspace_sim.ros.convert import MAX_SEED
+from growspace_sim.ros.share import share_file
 
 _FRACTION = Bounds(0.0, 1.0, low_open=True)
 SOURCE_RULE = ("'twin', a V4L2 device (/dev/videoN or its index), a video file, a folder of "
@@ -108,13 +108,7 @@ _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 
 def default_markers() -> str:
     """The installed ``config/markers.yaml`` (or the source tree's, when not installed)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return os.path.join(get_package_share_directory('growspace_camera'), 'config',
-                            'markers.yaml')
-    except Exception:  # noqa: BLE001 - not installed: the source tree
-        return os.path.join(os.path.dirname(__file__), '..', 'config', 'markers.yaml')
+    return str(share_file('growspace_camera', 'config', 'markers.yaml'))
 
 
 def load_layout(path: str = '') -> MarkerLayout:

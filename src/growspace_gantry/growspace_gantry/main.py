@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 import dataclasses
 import logging
-import os
 import sys
 import threading
 from typing import Any
@@ -26,6 +25,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.main import console_main, make_recorder, run_node
 from growspace_sim.node.params import NodeParams, ParamError
+from growspace_sim.ros.share import share_file
 
 NODE_NAME = 'growspace_gantry'
 
@@ -34,13 +34,7 @@ log = logging.getLogger('growspace_gantry.gantry_node')
 
 def default_calibration() -> str:
     """The installed ``config/gantry.yaml`` (or the source tree's, when not installed)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return os.path.join(get_package_share_directory('growspace_gantry'), 'config',
-                            'gantry.yaml')
-    except Exception:  # noqa: BLE001 - not installed: the source tree
-        return os.path.join(os.path.dirname(__file__), '..', 'config', 'gantry.yaml')
+    return str(share_file('growspace_gantry', 'config', 'gantry.yaml'))
 
 
 def run(argv: Sequence[str], stop: threading.Event) -> int:

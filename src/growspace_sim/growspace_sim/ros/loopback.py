@@ -16,25 +16,16 @@ from collections.abc import MutableMapping
 import os
 from pathlib import Path
 
+from growspace_sim.ros.share import share_file
+
 RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 PROFILE_VAR = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 PROFILE_NAME = 'fastdds_loopback.xml'
 
 
 def profile_path() -> Path:
-    """The shipped Fast DDS loopback profile (installed share/, else the source tree: also
-    outside a sourced workspace, where ament's index has no ``AMENT_PREFIX_PATH`` to search)."""
-    try:
-        from ament_index_python.packages import (
-            get_package_share_directory, PackageNotFoundError)
-    except ImportError:
-        pass
-    else:
-        try:
-            return Path(get_package_share_directory('growspace_sim')) / 'config' / PROFILE_NAME
-        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
-            pass
-    return Path(__file__).resolve().parents[2] / 'config' / PROFILE_NAME
+    """The shipped Fast DDS loopback profile."""
+    return share_file('growspace_sim', 'config', PROFILE_NAME)
 
 
 def confine(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
