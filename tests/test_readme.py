@@ -46,8 +46,10 @@ WHERE = [
     (r'^growspace-camera ', RUN),
     (r'^python -m growspace_sim\.tools\.pub ', RUN),
     (r'^growspace-replay ', RUN),
-    (r'^growspace-sweep .*--address HEAD_IP', 'needs a second machine (walked by hand: README)'),
-    (r'^(export RAY_AUTH_MODE|ray )', 'needs a second machine (walked by hand: README)'),
+    (r'^(growspace-sweep .*--address HEAD_IP|export RAY_AUTH_MODE|ray |mkdir -p ~/\.ray |'
+     r'RAY_ARGS=|\(umask 077 && ray get-auth-token|ssh OTHER )',
+     'the cluster recipe needs machines (walked by hand on two namespaced nodes: README); '
+     'one loopback node with a token: tests/test_sweep.py'),
     (r'^growspace-sweep config/sweeps/case_studies\.yaml$', 'needs torch (the learn extra) and '
                                                           'hours of training'),
     (r'^growspace-sweep ', 'covered: tests/test_sweep.py runs evaluation sweeps'),
