@@ -139,7 +139,6 @@ class RecordedSteps:
             raise ReplayError(f'{bag.path} is a realtime recording: photos are re-measured step '
                               f'by step, from lockstep recordings (gantry_node mode:=lockstep).')
         self.episodes = _Episodes(meta.get('digit_source') or 'auto')
-        self.photos = 0
 
     def __iter__(self) -> Iterator[Step]:
         group: list[BagMessage] = []
@@ -188,7 +187,6 @@ class RecordedSteps:
             step.photos.append(RecordedPhoto(msg, stamp, episode, last_step, mine.get(LIGHT),
                                              mine.get(RESULT), mine.get(MEASUREMENT), cfg,
                                              target, unknown))
-            self.photos += 1
         photographed = {p.stamp for p in step.photos}
         for stamp, topics in stamps.items():
             if stamp in photographed:
