@@ -43,6 +43,9 @@ WHERE = [
     (r'^camera_node .*source:=/dev/video', 'needs a camera (V4L2): tests read photos and videos '
                                           'instead (tests/test_camera_*.py)'),
     (r'^camera_node --ros-args', RUN),
+    (r'^growspace-camera (resegment|export) ', 'needs a rig recording (gantry_node with a '
+                                              'camera): tests/test_camera_resegment.py makes one '
+                                              'and runs these lines as written'),
     (r'^growspace-camera ', RUN),
     (r'^python -m growspace_sim\.tools\.pub ', RUN),
     (r'^growspace-replay ', RUN),

@@ -9,8 +9,17 @@
     growspace-camera measure PHOTO... [--challenge ... --target-x X --target-z Z]
         Measure photos (a fixed light, for trying thresholds on real photos): one line per
         photo with the reward and how sure it is; ``--overlay DIR`` writes what was seen.
+    growspace-camera resegment IN.mcap OUT.mcap [--params FILE.yaml] [--set NAME=VALUE ...]
+        Measure every photo of a rig's recording again with other settings, into a new
+        recording (docs/recording.md); the input is only read.
+    growspace-camera export BAG DIR [--params ...] [--set ...] [--format jpg|png]
+        Every photo of a rig's recording with what the camera saw drawn over it.
 
-Exit status: 0 done, 1 a photo could not be measured (``measure``), 2 bad arguments.
+Settings (``--params``, ``--set``) are camera_node's pipeline parameters (docs/hardware.md);
+they start from those a re-segmented recording holds, else from camera_node's defaults.
+
+Exit status: 0 done, 1 a photo could not be measured (``measure``), 2 bad arguments or an
+unreadable recording.
 """
 
 from __future__ import annotations
@@ -20,16 +29,22 @@ from pathlib import Path
 import sys
 
 import cv2
+import yaml
 
 from growspace_camera.measure import Target
+from growspace_camera.photo_export import export_photos, FORMATS, SCALE_RANGE
 from growspace_camera.pipeline import overlay, Pipeline
-from growspace_camera.settings import CameraParams, load_layout
+from growspace_camera.resegment import recorded_settings, resegment
+from growspace_camera.settings import (
+    CameraParams, load_layout, PIPELINE_FIELDS, pipeline_values, read_overrides, with_overrides)
 from growspace_camera.sheet import describe, write_sheet
 from growspace_camera.twin import PhotoTwin
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import initial_light
 from growspace_sim.node.params import ParamError
+from growspace_sim.recording import RecordingError
+from growspace_sim.replay.bag import ReplayError
 from growspace_sim.simulation import Simulation
 
 
@@ -49,6 +64,24 @@ def main(argv: list[str] | None = None) -> int:
     measure.add_argument('--overlay', help='write the segmentation pictures to this folder')
     for p in (markers, twin, measure):
         p.add_argument('--markers', default='', help='marker layout YAML (default: installed)')
+    reseg = sub.add_parser('resegment', help="measure a rig's recording again with other "
+                                             'settings, into a new recording')
+    reseg.add_argument('bag', help='the recording (gantry_node record_path, with a camera)')
+    reseg.add_argument('out', help='the new .mcap file (never an existing one)')
+    export = sub.add_parser('export', help="a rig's recorded photos with what the camera saw")
+    export.add_argument('bag')
+    export.add_argument('out', help='folder for the pictures (created; or an empty one)')
+    export.add_argument('--format', default='jpg', choices=FORMATS)
+    export.add_argument('--scale', type=float, default=0.5,
+                        help=f'picture size relative to the photo, {SCALE_RANGE[0]}..'
+                             f'{SCALE_RANGE[1]} (default 0.5)')
+    for p in (reseg, export):
+        p.add_argument('--params', metavar='FILE.yaml',
+                       help="pipeline settings: name: value, or camera_node's ROS params file")
+        p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                       help=f'one pipeline setting (after --params), of: '
+                            f'{", ".join(PIPELINE_FIELDS)}')
+        p.add_argument('--namespace', help='the chamber namespace (default: the only one)')
     for p in (twin, measure):
         p.add_argument('--challenge', default='control',
                        help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
@@ -56,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument('--setting', default='easy', help='a setting of the challenge')
         p.add_argument('--seed', type=int, default=0)
     args = parser.parse_args(argv)
+    if args.command in ('resegment', 'export'):
+        return _recorded(args)
     try:
         layout = load_layout(args.markers)
         cfg = SimConfig(challenge=args.challenge, setting=args.setting) \
@@ -125,6 +160,57 @@ def _measure(layout, cfg: SimConfig, args: argparse.Namespace) -> int:  # noqa: 
             cv2.imwrite(str(Path(args.overlay) / (Path(path).stem + '_seen.jpg')),
                         overlay(photo, m))
     return 1 if failed else 0
+
+
+def _recorded(args: argparse.Namespace) -> int:
+    """``resegment`` and ``export``: a recording's photos measured with chosen settings."""
+    def warn(line: str) -> None:
+        print(f'warning: {line}', file=sys.stderr)
+
+    try:
+        params, base = recorded_settings(args.bag)
+        if args.params:
+            params = with_overrides(params, read_overrides(args.params), args.params)
+        params = with_overrides(params, _pairs(args.set), '--set')
+        changed = {k: v for k, v in pipeline_values(params).items()
+                   if getattr(CameraParams(), k) != v}
+        print(f'settings: {base}' + (f', with {changed}' if changed else ''))
+        if args.command == 'resegment':
+            report = resegment(args.bag, args.out, params, base=base, namespace=args.namespace,
+                               warn=warn)
+            print(f'wrote {args.out}: {report.photos} photo(s) measured again, {report.measured} '
+                  f'read (recorded: {report.was_measured}), {report.changed} step(s) changed'
+                  + (f', {report.lost} step(s) whose photo is unreadable now unmeasured'
+                     if report.lost else ''))
+        else:
+            report = export_photos(args.bag, args.out, params, fmt=args.format,
+                                   scale=args.scale, namespace=args.namespace, warn=warn)
+            print(f'wrote {report.files} picture(s) to {args.out} ({report.measured} with a '
+                  f'plant read)')
+    except (ParamError, ReplayError, RecordingError) as e:
+        print(f'growspace-camera: error: {e}', file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f'growspace-camera: error: {e.strerror or e}'
+              f'{f" ({e.filename})" if e.filename else ""}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+def _pairs(items: list[str]) -> dict[str, object]:
+    """``--set NAME=VALUE`` arguments, each value read as YAML (0.1 a number, abc a string)."""
+    values = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        if not sep or not name.strip():
+            raise ParamError(f'--set {item!r}: expected NAME=VALUE, e.g. --set min_greenness=0.1')
+        try:
+            values[name.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            values[name.strip()] = text
+    return values
 
 
 if __name__ == '__main__':

@@ -8,7 +8,7 @@ prints the sheet from the same file the node reads.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import yaml
@@ -19,7 +19,7 @@ from growspace_camera.segment import SegmentParams
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.schema import Bounds, param
 from growspace_sim.node.params import (
-    check, frame_param, mode_param, ParamError, seed_param)
+    check, check_type, frame_param, mode_param, ParamError, seed_param, specs_of)
 from growspace_sim.ros.convert import MAX_SEED
 from growspace_sim.ros.share import share_file
 
@@ -104,6 +104,69 @@ class CameraParams:
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
+# The settings that change what a photo gives (the rest say where photos come from and how
+# they are published): what ``growspace-camera resegment`` and ``export`` take.
+PIPELINE_FIELDS = ('markers',
+                   *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
+                   *(f.name for f in fields(TreeParams)), 'max_fit_error_m')
+
+
+def pipeline_values(params: CameraParams) -> dict[str, Any]:
+    """The ``PIPELINE_FIELDS`` of some settings, by name."""
+    return {name: getattr(params, name) for name in PIPELINE_FIELDS}
+
+
+def with_overrides(params: CameraParams, values: dict[str, Any], where: str) -> CameraParams:
+    """Settings with some pipeline settings changed, each checked as camera_node checks it.
+
+    Args:
+        params: The settings to start from.
+        values: Name -> value (YAML types: numbers, strings).
+        where: Where the values come from, for the message (``--set``, a file name).
+
+    Raises:
+        ParamError: naming the setting, its value and what is allowed; for a name that is not
+            a pipeline setting, the names that are.
+    """
+    specs = {s.name: s for s in specs_of(CameraParams)}
+    changed = {}
+    for name, value in values.items():
+        if name not in PIPELINE_FIELDS:
+            raise ParamError(f'{where}: {name!r} is not a setting of the camera pipeline; '
+                             f'allowed: {", ".join(PIPELINE_FIELDS)}.')
+        try:
+            changed[name] = check_type(specs[name], value)
+        except ParamError as e:
+            raise ParamError(f'{where}: {e}') from None
+    try:
+        return replace(params, **changed)
+    except ValueError as e:
+        raise ParamError(f'{where}: {e}') from None
+
+
+def read_overrides(path: str) -> dict[str, Any]:
+    """Pipeline settings from a YAML file: a plain mapping of name: value, or camera_node's
+    ROS params file (``NODE: {ros__parameters: {...}}``), whose other settings are left out.
+
+    Raises:
+        ParamError: naming the file for an unreadable file or a shape it does not have.
+    """
+    try:
+        with open(path, encoding='utf-8') as f:
+            data = yaml.safe_load(f)
+    except OSError as e:
+        raise ParamError(f'--params {path!r} cannot be read: {e.strerror or e}') from None
+    except yaml.YAMLError as e:
+        raise ParamError(f'--params {path!r} is not YAML: {e}') from None
+    if isinstance(data, dict) and len(data) == 1:
+        (inner,) = data.values()
+        if isinstance(inner, dict) and isinstance(inner.get('ros__parameters'), dict):
+            names = set(PIPELINE_FIELDS)
+            return {k: v for k, v in inner['ros__parameters'].items() if k in names}
+    if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):
+        raise ParamError(f'--params {path!r} must hold a mapping of setting: value (or a ROS '
+                         f'params file of camera_node), got {type(data).__name__}.')
+    return data
 
 
 def default_markers() -> str:

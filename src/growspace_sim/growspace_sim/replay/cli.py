@@ -19,7 +19,12 @@ from growspace_sim.replay.resim import resimulate
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``growspace-replay`` command line (the tests parse the README's lines with it)."""
-    parser = argparse.ArgumentParser(prog='growspace-replay', description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(
+        prog='growspace-replay', description=__doc__.split('\n')[0],
+        epilog="The photos of a rig's recording (gantry_node with camera_node): "
+               '`growspace-camera resegment IN.mcap OUT.mcap --set NAME=VALUE` measures them '
+               'again with other settings into a new recording, `growspace-camera export BAG '
+               'DIR` draws what the camera saw on each (docs/recording.md).')
     sub = parser.add_subparsers(dest='command', required=True)
     p_info = sub.add_parser('info', help='episodes, returns, steps and duration')
     p_info.add_argument('bag')
