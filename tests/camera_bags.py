@@ -64,7 +64,8 @@ def rig_recording(path: Path, episodes: list[int | None], steps: int, *,
     world = Simulation(cfg)  # the plant the twin photographs, and the gantry's layout of it
     oracle = cfg.task.oracle()
     clock = iter(range(T0, T0 + 10**12, 10**7))
-    with McapRecorder(path, chunk_size=chunk_size) as rec:
+    # No timed flush: the chunks' layout depends on the messages only, not on this machine's load.
+    with McapRecorder(path, chunk_size=chunk_size, flush_period_s=3600.0) as rec:
         channels = {rel: rec.add_channel(f'{NS}/{rel}', t, q) for rel, (t, q) in TOPICS.items()}
         rec.add_metadata(METADATA_NAME, growspace_metadata(
             cfg, episodes[0], namespace=NS, frame_id='chamber', rate_hz=0.0, lockstep=True))
