@@ -34,6 +34,16 @@ class GantryParams:
     frame_id: str = frame_param('chamber', 'frame of light state and step results')
     record_path: str = param('', 'MCAP file to record the hardware run to; empty = no '
                              'recording')
+    camera: str = param('', "camera_node's capture service, called after each reached move "
+                        '(lockstep); empty = no camera: steps are answered without an image',
+                        pattern=r'(|[~/A-Za-z_][A-Za-z0-9_/~{}]*)',
+                        pattern_doc='a service name such as camera/capture, or empty')
+    capture_timeout_s: float = param(10.0, 'a photo not answered this long after it was asked '
+                                     'for fails its step', unit='s', bounds=Bounds(0.1, 3600.0))
+    photo_light: bool = param(False, "a white photo light on GRBL's flood coolant output: "
+                              'M8 for each photo, M9 after it and on every fault')
+    photo_settle_s: float = param(0.5, 'wait after the photo light is on before the photo',
+                                  unit='s', bounds=Bounds(0.0, 60.0))
 
     def __post_init__(self) -> None:
         check(self)

@@ -70,6 +70,10 @@ class FakeTransport(LocalTransport):
         self.inject_raw(topic, cdr)
         return cdr
 
+    def crossing(self, msg: Any, typename: str) -> Any:
+        """Service requests and responses through the codec both ways, as over rclpy."""
+        return types.deserialize(types.serialize(msg, typename), typename)
+
     def messages(self, topic: str) -> list[Any]:
         """Everything published on ``topic`` so far."""
         return [msg for msg, _ in self.published[self.resolve(topic)]]
