@@ -138,9 +138,9 @@ class GrblController:
                 and self._settled >= SETTLED_REPORTS and m.at(m.target, self.position))
 
     @property
-    def photo_light(self) -> bool | None:
-        """The photo light as GRBL last accepted it (None: unknown, or no photo light)."""
-        return self.motion.photo_accepted if self.motion.photo_managed else None
+    def has_photo_light(self) -> bool:
+        """A photo light is wired to the flood coolant output (``photo_light``)."""
+        return self.motion.photo_managed
 
     def photo_light_on(self) -> bool:
         """Idle at the target with the photo light on: GRBL accepted ``M8`` and nothing is

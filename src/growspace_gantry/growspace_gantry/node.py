@@ -231,7 +231,8 @@ class GantryNode:
 
     def _poll(self, now: float) -> None:
         c = self.controller
-        self.safety.tick(now, c.poll(now), busy=self.photo is not None and self.photo.busy)
+        photo = self.photo
+        self.safety.tick(now, c.poll(now), photographing=photo is not None and photo.busy)
         if self.pending is not None:
             reset_id, step_id, deadline = self.pending
             if c.reached():
@@ -239,15 +240,13 @@ class GantryNode:
                 if step_id:
                     self.steps += 1
                 self._answer(reset_id, step_id)
-                if self.photo is not None:
-                    self.photo.poll(now)
             elif c.phase != 'ready':
                 self._fail_pending(c.failure or f'the controller is {c.state}')
             elif now > deadline:
                 self.safety.fault(f'the move did not finish within move_timeout_s = '
                                   f'{self.params.move_timeout_s:g} s; holding, lamp off')
-        elif self.photo is not None:
-            self.photo.poll(now)
+        elif photo is not None:
+            photo.poll(now)  # the photo light, the service, the camera's answer or a timeout
         flush = getattr(self.log, 'flush', None)
         if flush is not None:
             flush()  # how many warnings the throttle kept back, once their period is over

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-import itertools
 import math
 from typing import Any
 
@@ -58,7 +57,10 @@ class Shot:
         light: The reached light (LightCommand), published as the step's ``light/state``.
         request: The Capture request.
         deadline: When it fails [s, the node's clock].
-        phase: ``LIGHT``, ``SETTLE``, ``SERVICE`` or ``ASKED``.
+        phase: ``LIGHT`` (waiting for GRBL's ``ok`` to ``M8``), ``SETTLE``, ``SERVICE``
+            (waiting for the capture service to be there) or ``ASKED``.
+        settle_until: When the photo light has settled [s].
+        cancel: Cancels the call once asked.
     """
 
     reset_id: int
@@ -69,7 +71,6 @@ class Shot:
     deadline: float
     phase: str
     settle_until: float = 0.0
-    token: int = 0
     cancel: Callable[[], None] = field(default=lambda: None, repr=False)
 
 
@@ -77,16 +78,17 @@ Answer = Callable[[Shot, Any, str], None]  # (shot, Capture response or None, fa
 
 
 class Photographer:
-    """The photo of each lockstep step, asked of the camera without blocking.
+    """The photo of each lockstep step, asked of the camera without ever blocking.
 
     Args:
         transport: The node's transport (its ``client`` calls the service).
-        controller: The GRBL controller (the photo light).
+        controller: The GRBL controller (its photo light, if it has one).
         service: The capture service name (``GantryParams.camera``).
-        timeout_s: ``capture_timeout_s``.
-        settle_s: ``photo_settle_s`` (used with a photo light only).
-        answer: Called once per shot that ends with an answer or a failure ('' or
-            '<code>: <why>'); not for a shot abandoned by ``abandon``.
+        timeout_s: ``capture_timeout_s``: from the start of a photo (after the settle time
+            with a photo light) to the camera's answer.
+        settle_s: ``photo_settle_s``, after GRBL accepted ``M8`` (with a photo light only).
+        answer: Called once per photo that ends with the camera's answer or a failure ('' or
+            '<code>: <why>'); never for a photo dropped by ``abandon``.
     """
 
     def __init__(self, transport: Any, controller: Any, service: str, timeout_s: float,
@@ -97,30 +99,25 @@ class Photographer:
         self.timeout_s, self.settle_s = timeout_s, settle_s
         self.answer = answer
         self.shot: Shot | None = None
-        self._tokens = itertools.count(1)
 
     @property
     def busy(self) -> bool:
-        """A photo is under way (the watchdog does not count it as silence)."""
+        """A photo is under way (its step is not answered yet)."""
         return self.shot is not None
-
-    @property
-    def phase(self) -> str:
-        return 'idle' if self.shot is None else self.shot.phase
 
     def start(self, reset_id: int, step_id: int, stamp: int, light: Any, request: Any,
               now: float) -> None:
         """Begin the photo of a reached move: the photo light first, if the rig has one."""
-        lit = self.controller.photo_light is not None
+        lit = self.controller.has_photo_light
         self.shot = Shot(reset_id, step_id, stamp, light, request,
                          now + self.timeout_s + (self.settle_s if lit else 0.0),
-                         LIGHT if lit else SERVICE, token=next(self._tokens))
+                         LIGHT if lit else SERVICE)
         if lit:
-            self.controller.set_photo_light(True)
+            self.controller.set_photo_light(True)  # M8 at the next Idle, before anything else
         self.poll(now)
 
     def poll(self, now: float) -> None:
-        """Advance the photo in progress (the node's poll loop calls this)."""
+        """Advance the photo in progress (the node's 10 ms loop calls this; never waits)."""
         shot = self.shot
         if shot is None:
             return
@@ -131,39 +128,40 @@ class Photographer:
         if shot.phase == SERVICE and self.client.ready():
             shot.phase = ASKED
             shot.cancel = self.client.call(shot.request,
-                                           lambda response, s=shot: self._answered(s, response))
-            if self.shot is not shot:
-                return  # answered at once (in process)
-        if now > shot.deadline:
-            if shot.phase == ASKED:
-                why = f'{TIMEOUT}: no answer from {self.service} within capture_timeout_s = ' \
-                    f'{self.timeout_s:g} s'
-            elif shot.phase == SERVICE:
-                why = f'{UNAVAILABLE}: no {self.service} service (is camera_node running in ' \
-                    f'this namespace?) within capture_timeout_s = {self.timeout_s:g} s'
-            else:
-                why = f'{TIMEOUT}: the photo light (M8) was not confirmed by the controller ' \
-                    f'within capture_timeout_s = {self.timeout_s:g} s'
-            self._end(shot, None, why)
+                                           lambda response: self._answered(shot, response))
+        if self.shot is shot and now > shot.deadline:
+            self._end(shot, None, self._late(shot.phase))
 
     def abandon(self) -> Shot | None:
-        """Drop the photo in progress (a fault, a newer command): a late answer is ignored."""
-        shot = self.shot
+        """Drop the photo in progress (a fault, a newer command, shutdown): the photo light is
+        switched off and a late answer is ignored. Returns the dropped photo, if any."""
+        shot, self.shot = self.shot, None
         if shot is not None:
-            self.shot = None
             shot.cancel()
             self.controller.set_photo_light(False)
         return shot
 
+    def _late(self, phase: str) -> str:
+        within = f'within capture_timeout_s = {self.timeout_s:g} s'
+        if phase == ASKED:
+            return f'{TIMEOUT}: no answer from {self.service} {within}'
+        if phase == SERVICE:
+            return f'{UNAVAILABLE}: no {self.service} service {within} (is camera_node ' \
+                f'running in this namespace?)'
+        return f'{TIMEOUT}: the controller did not accept the photo light (M8) {within}'
+
     def _answered(self, shot: Shot, response: Any) -> None:
-        if self.shot is shot:  # else a late answer to an abandoned or failed shot
+        if self.shot is shot:  # else a late answer to a photo abandoned or timed out
+            shot.cancel = _answered_already
             self._end(shot, response, '')
 
     def _end(self, shot: Shot, response: Any, failure: str) -> None:
-        self.shot = None
-        shot.cancel()
-        self.controller.set_photo_light(False)
+        self.abandon()
         self.answer(shot, response, failure)
+
+
+def _answered_already() -> None:
+    """Nothing to cancel: the call was answered."""
 
 
 def capture_request(stamp: int, step_id: int, step: int, config: str, light: Any,
