@@ -66,7 +66,7 @@ class RclpyClient:
         return self._client.service_is_ready()
 
     def call(self, request: Any, done: ResponseCallback) -> Callable[[], None]:
-        from rclpy.serialization import deserialize_message, serialize_message
+        from rclpy.serialization import deserialize_message
 
         where, typename = self._where, f'{self.srv_typename}_Response'
         safe = guarded(self._logger, f'client:{where}', done)
@@ -80,7 +80,7 @@ class RclpyClient:
                 self._logger.warn(f'client:{where}', f'{where}: call failed: {f.exception()}')
                 return
             try:
-                response = types.deserialize(serialize_message(f.result()), typename)
+                response = from_rclpy(f.result(), typename)
             except types.CdrError as e:
                 self._logger.warn(f'client:{where}', f'{where}: dropped a malformed answer: {e}')
                 return
@@ -91,6 +91,18 @@ class RclpyClient:
             self._client.remove_pending_request(future)
             future.cancel()
         return cancel
+
+
+def from_rclpy(msg: Any, typename: str) -> Any:
+    """An rclpy message (a service's request or response) as our codec's message.
+
+    Raises:
+        types.CdrError: rclpy's bytes do not decode as ``typename``.
+    """
+    from rclpy.serialization import serialize_message
+
+    # rmw_serialize sizes the bytes by Fast CDR's estimate, which may run past the data.
+    return types.deserialize(serialize_message(msg), typename, any_tail=True)
 
 
 def parameter_descriptor(spec: ParamSpec, mode: str) -> Any:
@@ -263,13 +275,13 @@ class RclpyTransport:
         return endpoint is not None and endpoint.get_publisher_count() > 0
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
-        from rclpy.serialization import deserialize_message, serialize_message
+        from rclpy.serialization import deserialize_message
 
         srv = interface_class(srv_typename)
 
         def call(request: Any, response: Any) -> Any:
             try:
-                req = types.deserialize(serialize_message(request), f'{srv_typename}_Request')
+                req = from_rclpy(request, f'{srv_typename}_Request')
                 answer = handler(req)
                 return deserialize_message(
                     types.serialize(answer, f'{srv_typename}_Response'), srv.Response)
