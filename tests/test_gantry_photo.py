@@ -328,3 +328,21 @@ def test_a_newer_command_abandons_the_photo_and_the_light_goes_off_before_the_mo
                                            if line.startswith('$J'))
     finally:
         rig.close()
+
+
+def test_a_photo_in_progress_is_not_silence_for_the_watchdog(tmp_path) -> None:
+    """The agent waits for the step's answer while the photo light settles: the watchdog
+    (0.3 s here) must not take the lamp away from the photo."""
+    rig = CameraRig(tmp_path, answer=response(reward=0.5), watchdog_s=0.3, photo_settle_s=0.8,
+                    capture_timeout_s=5.0)
+    try:
+        rig.ready()
+        rig.transport.inject('reset', types.new(types.RESET_REQUEST, reset_id=1, has_seed=True,
+                                                seed=11))
+        assert rig.run_until(lambda: rig.results())
+        assert rig.results()[-1].info == '' and rig.results()[-1].reward == 0.5
+        assert not any('watchdog' in w for w in rig.transport.warnings), rig.transport.warnings
+        assert rig.asked and rig.asked[0][1]  # photographed under the photo light, lamp on
+        assert rig.grbl.spindle[0] == 'M3'
+    finally:
+        rig.close()
