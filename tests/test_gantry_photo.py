@@ -276,6 +276,11 @@ def test_each_step_is_photographed_under_the_photo_light_and_answered_with_the_m
     assert not any('refused: error' in w for w in rig.transport.warnings), \
         rig.transport.warnings
 
+    def status() -> dict[str, str]:  # gantry/status says what is true of the photo light
+        return {kv.key: kv.value for kv in
+                rig.transport.messages('gantry/status')[-1].status[0].values}
+    assert rig.run_until(lambda: (status()['photo'], status()['photo_light']) == ('idle', 'off'))
+
 
 def test_no_camera_service_answers_unavailable_and_switches_the_light_off(tmp_path) -> None:
     rig = CameraRig(tmp_path, capture_timeout_s=0.3)

@@ -142,6 +142,11 @@ class GrblController:
         """A photo light is wired to the flood coolant output (``photo_light``)."""
         return self.motion.photo_managed
 
+    @property
+    def photo_light_accepted(self) -> bool | None:
+        """The photo light as the last ``M8``/``M9`` GRBL accepted left it (None: unknown)."""
+        return self.motion.photo_accepted
+
     def photo_light_on(self) -> bool:
         """Idle at the target with the photo light on: GRBL accepted ``M8`` and nothing is
         queued or in flight."""

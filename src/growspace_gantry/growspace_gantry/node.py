@@ -252,7 +252,8 @@ class GantryNode:
             flush()  # how many warnings the throttle kept back, once their period is over
         realtime_due = self.params.mode == 'realtime' and now >= self._next_status
         key = (c.state, c.alarm, c.phase, c.fault, self.safety.estop_latched,
-               self.safety.position_known)
+               self.safety.position_known, photo is not None and photo.phase,
+               c.photo_light_accepted)
         if key != self._status_key or now >= self._next_status:
             self._status_key = key
             self._next_status = now + (1.0 / self.params.status_hz if

@@ -105,6 +105,11 @@ class Photographer:
         """A photo is under way (its step is not answered yet)."""
         return self.shot is not None
 
+    @property
+    def phase(self) -> str:
+        """Where the photo in progress is (``gantry/status``); 'idle' without one."""
+        return 'idle' if self.shot is None else self.shot.phase
+
     def start(self, reset_id: int, step_id: int, stamp: int, light: Any, request: Any,
               now: float) -> None:
         """Begin the photo of a reached move: the photo light first, if the rig has one."""
