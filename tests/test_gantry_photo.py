@@ -9,6 +9,7 @@ transport.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.node.fake import FakeTransport
 from growspace_sim.ros import convert, types
 from growspace_sim.simulation import Simulation
-from test_gantry_node import Rig
+from test_gantry_node import Rig, RIG as RIG_SETTINGS
 
 STAMP = 1_700_000_000_000_000_123
 CFG = SimConfig()  # control: one plant, 84 px
@@ -351,3 +352,86 @@ def test_a_photo_in_progress_is_not_silence_for_the_watchdog(tmp_path) -> None:
         assert rig.grbl.spindle[0] == 'M3'
     finally:
         rig.close()
+
+
+@pytest.mark.parametrize('challenge', ['control', 'shape'])
+def test_the_capture_request_carries_the_episodes_target(challenge) -> None:
+    """A point for the point challenges, the digit's mask for shape (what the camera scores)."""
+    from growspace_gantry.photo import capture_request
+
+    sim = Simulation(SimConfig(challenge=challenge))
+    sim.reset(seed=3)
+    c, cfg = sim.chamber, sim.cfg
+    light = convert.light_msg(c.light, 4, STAMP, 'chamber')
+    request = capture_request(STAMP, 4, 2, '{"config": {}}', light, cfg, c.target,
+                              c.target_mask, 'chamber')
+    request = types.deserialize(types.serialize(request, f'{photo.CAPTURE}_Request'),
+                                f'{photo.CAPTURE}_Request')
+    assert (request.step_id, request.step, convert.to_ns(request.header.stamp)) == (4, 2, STAMP)
+    assert request.light.x == c.light.x
+    if challenge == 'shape':
+        assert not request.has_point_target
+        assert np.array_equal(np.asarray(request.target_mask).reshape(c.target_mask.shape),
+                              np.asarray(c.target_mask, np.uint8))
+        assert request.target_mask.size == cfg.resolution ** 2 and request.target_mask.any()
+    else:
+        assert request.has_point_target and request.target_mask.size == 0
+        assert complex(request.target_x, request.target_z) == c.target
+
+
+# ------------------------------------------------ the emulator's flood output, as GRBL documents
+
+
+def test_the_emulators_flood_output_follows_grbl(tmp_path) -> None:
+    """``M8``/``M9`` switch the flood output, ``A:`` reports it (``F``, after the spindle's
+    ``S``) only beside ``Ov:``, at once after a change; ``M7`` needs a compile option; a soft
+    reset and a limit alarm (GRBL's ``mc_reset``) switch it off."""
+    from grbl_emulator import GrblEmulator
+    from growspace_gantry.link import SerialLink
+
+    with GrblEmulator(RIG_SETTINGS, speedup=40.0, link_dir=tmp_path) as grbl:
+        link = SerialLink(grbl.port)
+        seen: list[str] = []
+
+        def until(predicate, send: bytes | None = None) -> str:
+            if send is not None:
+                link.write(send)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                for line in link.read_lines():
+                    seen.append(line)
+                    if predicate(line):
+                        return line
+                time.sleep(0.005)
+            raise AssertionError(f'not seen; got {seen[-5:]}')
+
+        def report_with_overrides(within: int = 12) -> str:
+            for _ in range(within):
+                line = until(lambda x: x.startswith('<'), b'?')
+                if '|Ov:' in line:
+                    return line
+            raise AssertionError(seen[-within:])
+
+        try:
+            link.write(b'\x18')
+            until(lambda x: x.startswith('Grbl '))
+            assert until(lambda x: x in ('ok',) or x.startswith('error'), b'M8\n') == 'ok'
+            assert grbl.coolant
+            # the change at the next report, or the one after when that one carries WCO
+            assert report_with_overrides(within=2).endswith('|A:F>')
+            until(lambda x: x == 'ok', b'M3 S100\n')
+            assert report_with_overrides().endswith('|A:SF>')
+            assert until(lambda x: x == 'ok' or x.startswith('error'), b'M7\n') == 'error:20'
+            assert until(lambda x: x == 'ok', b'M9\n') and not grbl.coolant
+            assert report_with_overrides().endswith('|A:S>')
+            until(lambda x: x == 'ok', b'M8\n')
+            link.write(b'\x18')  # a soft reset: spindle and coolant off
+            until(lambda x: x.startswith('Grbl '))
+            assert not grbl.coolant and grbl.spindle[0] == 'M5'
+            assert '|A:' not in report_with_overrides()
+            until(lambda x: x == 'ok', b'M8\n')
+            grbl.trigger_alarm(1)  # a hard limit: mc_reset, then the alarm
+            until(lambda x: x == 'ALARM:1')
+            assert not grbl.coolant
+        finally:
+            link.close()
