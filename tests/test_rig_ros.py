@@ -83,7 +83,7 @@ def recorded(bag) -> list[tuple[str, object]]:
 def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, tmp_path):
     bag = tmp_path / 'rig.mcap'
     camera = start_camera()
-    gantry = start_gantry(grbl, bag)
+    gantry = start_gantry(grbl, bag, '-p', 'capture_timeout_s:=30.0')  # a loaded CI machine
     env = None
     try:
         wait_until_idle()

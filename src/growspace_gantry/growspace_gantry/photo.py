@@ -84,8 +84,8 @@ class Photographer:
         transport: The node's transport (its ``client`` calls the service).
         controller: The GRBL controller (its photo light, if it has one).
         service: The capture service name (``GantryParams.camera``).
-        timeout_s: ``capture_timeout_s``: from the start of a photo (after the settle time
-            with a photo light) to the camera's answer.
+        timeout_s: ``capture_timeout_s``: from the reached move to the camera's answer, the
+            photo light's settle time not counted.
         settle_s: ``photo_settle_s``, after GRBL accepted ``M8`` (with a photo light only).
         answer: Called once per photo that ends with the camera's answer or a failure ('' or
             '<code>: <why>'); never for a photo dropped by ``abandon``.
