@@ -332,11 +332,8 @@ class GantryNode:
 
     def _result(self, step_id: int, reset_id: int, info: str = '', stamp: int | None = None,
                 truncated: bool = False, outcome: StepOutcome | None = None) -> None:
-        if outcome is None:
-            outcome = StepOutcome(0.0, np.zeros(self.cfg.plant_count), False, truncated, 0)
-        else:
-            outcome = StepOutcome(outcome.reward, outcome.plant_rewards, outcome.success,
-                                  truncated, 0)
+        outcome = (outcome or StepOutcome(0.0, np.zeros(self.cfg.plant_count), False, False,
+                                          0))._replace(truncated=truncated)
         self._publish('result', convert.step_result_msg(
             outcome, step_id=step_id, reset_id=reset_id, step=self.steps,
             stamp_ns=self.transport.now_ns() if stamp is None else stamp,
