@@ -22,6 +22,11 @@ What it models:
   had completed first): it comes back Idle, no alarm;
 - jogs (``$J=``, G20/G21/G53/G90/G91, F required, Idle or Jog only, soft-limit error:15),
   G0/G1/M3/M4/M5/S (S reported 0 after M5), alarms that only ``$X`` or ``$H`` leave, laser mode,
+- the flood coolant output (``M8`` on, ``M9`` off; ``M7`` mist is a compile option GRBL ships
+  without: error:20); a reset, and an alarm that resets the motion (limits, homing: GRBL's
+  ``mc_reset``), switch spindle and coolant off; the accessory field ``A:`` (S, C, F) comes
+  only with the override field ``Ov:``, every 10th report and in the next one after a change
+  (Interface documentation);
   motion in time (``speedup`` times faster than real time, distances unchanged: ``$$`` reports
   the rates and accelerations of that faster machine, so a driver's physics checks hold);
 - faults: ``trigger_alarm``, ``unplug``/``replug``, ``restart`` (power glitch: banner, position
@@ -51,6 +56,7 @@ DEFAULTS = {0: 10.0, 1: 25.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 10: 1.0, 1
 REALTIME = {0x3F, 0x21, 0x7E, 0x18, 0x85}
 MOVING = ('Run', 'Jog', 'Home', 'Hold:1')
 LATE_S = 0.05  # a jog cancel this soon after a jog's end crossed it on the wire [s]
+RESETTING_ALARMS = (1, 2, 6, 7, 8, 9)  # limits and homing failures: GRBL calls mc_reset
 
 
 def random_damage(every: int, seed: int = 0) -> Callable[[str], str | None]:
@@ -95,6 +101,9 @@ class GrblEmulator(GrblLines):
         self.mpos = (0.0, 0.0, 0.0)
         self.spindle = ('M5', 0.0)  # (mode, S as reported: 0 while off)
         self.lamp_history: list[tuple[str, float]] = []
+        self.coolant = False  # the flood coolant output (the rig's photo light)
+        self.coolant_history: list[bool] = []
+        self._accessories_changed = False
         self.jogs: list[dict] = []  # every jog planned: target, outcome, end time
         self.cancels: list[str] = []  # what each jog cancel met: cancelled, or ignored (early,
         # late, repeat, ignored: see _cancel_outcome)
@@ -161,6 +170,7 @@ class GrblEmulator(GrblLines):
             self._parsed_at.clear()
             self.mpos = self._from = (0.0, 0.0, 0.0)  # no homing: GRBL starts at 0
             self.spindle, self._programmed_s = ('M5', 0.0), 0.0
+            self._coolant(False)
             homing = self.settings[22] == 1.0
             self.state = 'Alarm' if homing else 'Idle'
             self._send(f"\r\nGrbl {self.version} ['$' for help]\r\n")
@@ -172,6 +182,9 @@ class GrblEmulator(GrblLines):
     def trigger_alarm(self, code: int) -> None:
         with self._lock:
             self._halt('alarm')
+            if code in RESETTING_ALARMS:  # mc_reset: spindle and coolant off
+                self.spindle = ('M5', 0.0)
+                self._coolant(False)
             self.state = 'Alarm'
             self._send(f'ALARM:{code}\r\n')
 
@@ -280,12 +293,19 @@ class GrblEmulator(GrblLines):
         self._rx.clear()
         self._parsed_at.clear()
         self.spindle = ('M5', 0.0)
+        self._coolant(False)
         if moving:
             self._send('ALARM:3\r\n')
         self._send(f"\r\nGrbl {self.version} ['$' for help]\r\n")
         self.state = 'Alarm' if alarm else 'Idle'
         if alarm:
             self._send("[MSG:'$H'|'$X' to unlock]\r\n")
+
+    def _coolant(self, on: bool) -> None:
+        if on != self.coolant:
+            self._accessories_changed = True
+        self.coolant = on
+        self.coolant_history.append(on)
 
     def _status(self) -> None:
         mask = int(self.settings[10])
@@ -299,9 +319,14 @@ class GrblEmulator(GrblLines):
         fields.append(f'FS:{feed:.0f},{self.spindle[1]:.0f}')
         self._reports += 1
         if self._reports % 10 == 1:
-            fields.append('WCO:0.000,0.000,0.000')
-        if self.spindle[0] != 'M5':
-            fields.append('A:' + ('S' if self.spindle[0] == 'M3' else 'C'))
+            fields.append('WCO:0.000,0.000,0.000')  # the overrides wait for the next report
+        elif self._reports % 10 == 2 or self._accessories_changed:
+            self._accessories_changed = False
+            fields.append('Ov:100,100,100')
+            accessories = ('' if self.spindle[0] == 'M5' else 'S' if self.spindle[0] == 'M3'
+                           else 'C') + ('F' if self.coolant else '')
+            if accessories:
+                fields.append('A:' + accessories)
         line = '<' + '|'.join(fields) + '>'
         damaged = self.damage(line) if self.damage is not None else None
         if damaged is not None:

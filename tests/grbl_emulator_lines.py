@@ -110,17 +110,25 @@ class GrblLines:
             return 1
         codes = {(a, v) for a, v in words if a in 'GM'}
         known = {('G', 0), ('G', 1), ('G', 21), ('G', 90), ('G', 94), ('M', 3), ('M', 4),
-                 ('M', 5)}
+                 ('M', 5), ('M', 8), ('M', 9)}  # M7 (mist) needs a compile option
         if codes - known:
             return 20
+        coolant = codes & {('M', 8), ('M', 9)}
+        if len(coolant) > 1:
+            return 21  # two commands of one modal group in a block
+        if coolant:
+            self._coolant(('M', 8) in coolant)
         s = [v for a, v in words if a == 'S']
         self._programmed_s = s[0] if s else self._programmed_s
+        spindle = self.spindle
         if ('M', 5) in codes:
             self.spindle = ('M5', 0.0)
         elif ('M', 3) in codes or ('M', 4) in codes:
             self.spindle = ('M3' if ('M', 3) in codes else 'M4', self._programmed_s)
         elif s and self.spindle[0] != 'M5':
             self.spindle = (self.spindle[0], self._programmed_s)
+        if self.spindle[0] != spindle[0]:
+            self._accessories_changed = True
         self.lamp_history.append(self.spindle)
         if any(a in 'XYZ' for a, _ in words):
             target = self._target(words, relative=False, inches=False)

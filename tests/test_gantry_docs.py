@@ -124,4 +124,14 @@ def test_gantry_node_runs_as_written(tmp_path, line) -> None:
             proc.send_signal(signal.SIGINT)
             out = proc.communicate(timeout=20)[0]
         assert proc.returncode == 0, out
-        assert grbl.spindle[0] == 'M5'
+        assert grbl.spindle[0] == 'M5' and not grbl.coolant
+
+
+def test_the_hardware_pages_parameter_table_is_the_declaration() -> None:
+    # Regenerate with: python -m growspace_gantry.settings
+    from growspace_gantry.settings import GantryParams
+    from growspace_sim.core import schema
+
+    table = schema.markdown_table(GantryParams)
+    assert table in (ROOT / 'docs' / 'hardware.md').read_text(encoding='utf-8'), \
+        'docs/hardware.md parameter table differs from GantryParams'

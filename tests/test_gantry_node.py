@@ -52,7 +52,8 @@ class Rig:
         self.cal = cal or load_cal()
         t = self.transport
         self.controller = GrblController(lambda: SerialLink(self.grbl.port), self.cal,
-                                         Log(t.logger.warn, t.logger.info), 0.02)
+                                         Log(t.logger.warn, t.logger.info), 0.02,
+                                         photo_light=params.get('photo_light', False))
         self.node = GantryNode(t, self.controller, SimConfig(), GantryParams(
             port=self.grbl.port, **{'seed': 7, **params}))
 

@@ -1,7 +1,8 @@
 """The installed ``gantry_node`` on real rclpy, driving an emulated GRBL 1.1 on a pty.
 
-The bridge's lockstep link drives it like a simulated chamber (no image: the gantry has no
-camera yet); SIGTERM during a move leaves the lamp off and the machine stopped.
+The bridge's lockstep link drives it like a simulated chamber (no image: the gantry runs without
+a camera here: tests/test_rig_ros.py has one); SIGTERM during a move leaves the lamp off and the
+machine stopped.
 """
 
 from __future__ import annotations

@@ -64,10 +64,12 @@ class GrblController:
         calibration: the rig's calibration (checked against ``$$``).
         log: where warnings and information go.
         status_period_s: how often to ask for a status report (``?``).
+        photo_light: a white photo light is wired to the flood coolant output (``M8``/``M9``):
+            it is switched off at every connection and on every fault, like the lamp.
     """
 
     def __init__(self, open_link: Callable[[], Link], calibration: Calibration, log: Log,
-                 status_period_s: float = 0.1) -> None:
+                 status_period_s: float = 0.1, photo_light: bool = False) -> None:
         self.open_link = open_link
         self.cal = calibration
         self.log = log
@@ -82,7 +84,7 @@ class GrblController:
         self.fault: str | None = None  # why nothing moves (settings mismatch), until restart
         self.failure: str | None = None  # the last failure, until the next recovery
         self.version = ''
-        self.motion = Motion(calibration)  # the target, the lamp, the jog on the machine
+        self.motion = Motion(calibration, photo_light)  # the target, the lights, the jog
         self._events: list[Fault | Homed] = []
         self._own_reset = False  # the next banner answers our own soft reset
         self._filter = positions.PositionFilter()
@@ -135,9 +137,25 @@ class GrblController:
                 and not m.queue and not self.counter.pending and self.status.state == 'Idle'
                 and self._settled >= SETTLED_REPORTS and m.at(m.target, self.position))
 
+    @property
+    def has_photo_light(self) -> bool:
+        """A photo light is wired to the flood coolant output (``photo_light``)."""
+        return self.motion.photo_managed
+
+    @property
+    def photo_light_accepted(self) -> bool | None:
+        """The photo light as the last ``M8``/``M9`` GRBL accepted left it (None: unknown)."""
+        return self.motion.photo_accepted
+
+    def photo_light_on(self) -> bool:
+        """Idle at the target with the photo light on: GRBL accepted ``M8`` and nothing is
+        queued or in flight."""
+        return self.reached() and self.motion.photo and self.motion.photo_accepted is True
+
     def lamp_confirmed_off(self) -> bool:
-        """Idle, and the controller accepted the lamp-off line (nothing left in flight)."""
-        return (self.ready and self.motion.lamp_accepted == 0.0 and not self.motion.queue
+        """Idle, and the controller accepted the lines that switch the lamp and the photo
+        light off (nothing left in flight)."""
+        return (self.ready and self.motion.lights_off and not self.motion.queue
                 and not self.counter.pending and self.status.state == 'Idle')
 
     # --- requests --------------------------------------------------------------------------
@@ -152,8 +170,13 @@ class GrblController:
         """Lamp power in S units (0 = off); sent at the next Idle, where GRBL accepts G-code."""
         self.motion.lamp_s = power_s
 
+    def set_photo_light(self, on: bool) -> None:
+        """The photo light (``M8``/``M9``), sent at the next Idle; ignored without one."""
+        self.motion.photo = on and self.motion.photo_managed
+
     def safe_stop(self) -> None:
-        """No target and lamp off: a running jog is cancelled, then ``M5`` once Idle."""
+        """No target, lamp and photo light off: a running jog is cancelled, then ``M5`` (and
+        ``M9``) once Idle."""
         self.motion.stop()
 
     def estop(self) -> bool:

@@ -328,6 +328,12 @@ def jog_line(target: Mapping[str, float], feed_mm_min: float) -> str:
     return f'$J=G21G53{"".join(words)}F{feed_mm_min:.0f}'
 
 
+# The photo light on GRBL's flood coolant output (Arduino pin A3 on the Uno build): M8 on, M9
+# off (M9 switches every coolant output off). GRBL 1.1 always has M8 (M7, mist, is a compile
+# option); a reset or an alarm that resets the motion switches it off, as it does the spindle.
+PHOTO_ON, PHOTO_OFF = 'M8', 'M9'
+
+
 def lamp_line(power_s: float) -> str:
     """``M3 S..`` (constant power; in laser mode a new S never stops motion) or ``M5``.
 

@@ -58,7 +58,8 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
         recorder = make_recorder(settings.record_path)
         logger = transport.logger
         controller = GrblController(lambda: SerialLink(settings.port, settings.baud), cal,
-                                    Log(logger.warn, logger.info), 1.0 / settings.status_hz)
+                                    Log(logger.warn, logger.info), 1.0 / settings.status_hz,
+                                    photo_light=settings.photo_light)
         node = GantryNode(transport, controller, cfg, settings, recorder)
         logger.info(f'gantry_node {transport.resolve("~")}: {settings.mode} mode, '
                     f'{cfg.challenge} light, port {settings.port}'

@@ -10,8 +10,9 @@ it what to write. The rules, from GRBL 1.1's Jogging and Commands documentation:
   newest target goes once GRBL reports Idle (a jog sent during the cancel would be flushed).
 - A target gets one jog. A jog that ends short of its target without our cancel (a hold or a
   door on the machine) is a fault, never retried.
-- G-code (the lamp's ``M3``/``M5``) only from Idle with no jog: GRBL refuses it while jogging
-  (error:9). The lamp line goes before the jog.
+- G-code (the lamp's ``M3``/``M5``, the photo light's ``M8``/``M9``) only from Idle with no
+  jog: GRBL refuses it while jogging (error:9). Both lights' lines go before the jog, so the
+  photo light is off before the lamp moves.
 """
 
 from __future__ import annotations
@@ -41,11 +42,14 @@ class Motion:
         cal: the calibration (feed rate, position tolerance).
     """
 
-    def __init__(self, cal: Calibration) -> None:
+    def __init__(self, cal: Calibration, photo_light: bool = False) -> None:
         self.cal = cal
         self.target: dict[str, float] | None = None
         self.lamp_s = 0.0  # lamp power asked for [S]
         self.lamp_accepted: float | None = None  # lamp power of the last line GRBL accepted
+        self.photo_managed = photo_light  # a photo light is wired to the flood coolant output
+        self.photo = False  # photo light asked for
+        self.photo_accepted: bool | None = None  # of the last M8/M9 GRBL accepted
         self.jog: Jog | None = None
         self.jogged = False  # the target's one jog was sent (or was not needed)
         self.queue: list[str] = []  # G-code waiting for Idle
@@ -61,15 +65,24 @@ class Motion:
         self.jogged = False
 
     def stop(self) -> None:
-        """No target, lamp off (a running jog is cancelled at the next chance)."""
+        """No target, lamp and photo light off (a running jog is cancelled at the next
+        chance)."""
         self.target = None
         self.lamp_s = 0.0
+        self.photo = False
 
     def forget(self) -> None:
         """The controller's buffers were emptied (a reset, a lost link): nothing is on it."""
         self.jog = None
         self.queue.clear()
         self.lamp_accepted = None
+        self.photo_accepted = None
+
+    @property
+    def lights_off(self) -> bool:
+        """GRBL accepted the lines that switch the lamp (and the photo light) off."""
+        return self.lamp_accepted == 0.0 and (not self.photo_managed
+                                              or self.photo_accepted is False)
 
     def at(self, target: Mapping[str, float], position: Mapping[str, float] | None) -> bool:
         return position is not None and all(
@@ -83,6 +96,8 @@ class Motion:
             elif self.jog is not None and self.jog.phase == SENT:
                 self.jog.phase = ACCEPTED
                 self.ask_status = True
+        elif ok and line in (grbl.PHOTO_ON, grbl.PHOTO_OFF):
+            self.photo_accepted = line == grbl.PHOTO_ON
         elif ok and line.startswith('M'):
             self.lamp_accepted = 0.0 if line == 'M5' else float(line.split('S')[1])
 
@@ -123,6 +138,8 @@ class Motion:
             return None  # one line in flight at a time
         if self.lamp_accepted != self.lamp_s and not self.queue:
             self.queue.append(grbl.lamp_line(self.lamp_s))
+        if self.photo_managed and self.photo_accepted != self.photo and not self.queue:
+            self.queue.append(grbl.PHOTO_ON if self.photo else grbl.PHOTO_OFF)
         if self.queue:
             return self.queue.pop(0)
         if self.target is None or self.jogged:

@@ -16,6 +16,10 @@ chamber namespace:
   move is done
 - out ``gantry/status`` (diagnostic_msgs/DiagnosticArray): state, position, alarm, buffer, link
   (1 Hz and on change)
+- with ``camera`` (lockstep): calls camera_node's ``camera/capture`` after each reached move and
+  answers the step when it answers (``photo.py``); out ``camera/image_raw``, ``plant/state``,
+  ``camera/photo`` (sensor_msgs/CompressedImage) and ``camera/measurement``, in the simulator's
+  order around ``light/state``, all with the step's stamp, and the measured reward
 
 The light model is a ``Simulation`` that is never stepped: its light moves by ``core.light``
 (clamped inside the chamber exactly as in the simulator) and a reset places it with the task's
@@ -39,6 +43,7 @@ import numpy as np
 
 from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController, Log
+from growspace_gantry.photo import CAMERA_OUTPUTS, capture_request, outputs, Photographer, Shot
 from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
 from growspace_gantry.status import diagnostics, DIAGNOSTICS
@@ -108,7 +113,17 @@ class GantryNode:
         self._status_key: tuple = ()
         self._channels: dict[str, int] = {}
         self._size_warned = False
-        self._pubs = {t.key: transport.publisher(t.typename, t.name, t.qos) for t in OUTPUTS}
+        self.photo: Photographer | None = None
+        camera = params.camera and params.mode == 'lockstep'
+        self.outputs = (*OUTPUTS, *(CAMERA_OUTPUTS if camera else ()))
+        self._pubs = {t.key: transport.publisher(t.typename, t.name, t.qos) for t in self.outputs}
+        if camera:
+            self.photo = Photographer(transport, controller, params.camera,
+                                      params.capture_timeout_s, params.photo_settle_s,
+                                      self._photographed)
+        elif params.camera:
+            self.log.warn('camera', f'gantry: camera = {params.camera!r} is used in lockstep '
+                          f'mode only; in realtime camera_node photographs on its own timer')
         handlers = {'reset': self.on_reset, 'command': self.on_command,
                     'estop': lambda msg, cdr: self.estop('gantry/estop topic')}
         for t in INPUTS:
@@ -216,7 +231,8 @@ class GantryNode:
 
     def _poll(self, now: float) -> None:
         c = self.controller
-        self.safety.tick(now, c.poll(now))
+        photo = self.photo
+        self.safety.tick(now, c.poll(now), photographing=photo is not None and photo.busy)
         if self.pending is not None:
             reset_id, step_id, deadline = self.pending
             if c.reached():
@@ -229,12 +245,15 @@ class GantryNode:
             elif now > deadline:
                 self.safety.fault(f'the move did not finish within move_timeout_s = '
                                   f'{self.params.move_timeout_s:g} s; holding, lamp off')
+        elif photo is not None:
+            photo.poll(now)  # the photo light, the service, the camera's answer or a timeout
         flush = getattr(self.log, 'flush', None)
         if flush is not None:
             flush()  # how many warnings the throttle kept back, once their period is over
         realtime_due = self.params.mode == 'realtime' and now >= self._next_status
         key = (c.state, c.alarm, c.phase, c.fault, self.safety.estop_latched,
-               self.safety.position_known)
+               self.safety.position_known, photo is not None and photo.phase,
+               c.photo_light_accepted)
         if key != self._status_key or now >= self._next_status:
             self._status_key = key
             self._next_status = now + (1.0 / self.params.status_hz if
@@ -244,7 +263,7 @@ class GantryNode:
                 self._publish('light', self._reached_light(0, self.transport.now_ns()))
 
     def _move(self, target: dict[str, float], step_id: int | None, placing: bool) -> None:
-        if self.pending is not None:
+        if self.pending is not None or (self.photo is not None and self.photo.busy):
             self._fail_pending(f'superseded by a newer command (step_id {step_id})')
         if self.cal.size is None and not self._size_warned:
             self._size_warned = True
@@ -263,9 +282,14 @@ class GantryNode:
             self._result(step_id, self.reset_id, info=info)
 
     def _fail_pending(self, reason: str) -> None:
-        if self.pending is None:
+        """Answer the step in progress (a move, or its photo) as failed."""
+        shot = self.photo.abandon() if self.photo is not None else None
+        if shot is not None:
+            reset_id, step_id = shot.reset_id, shot.step_id
+        elif self.pending is not None:
+            reset_id, step_id, _ = self.pending
+        else:
             return
-        reset_id, step_id, _ = self.pending
         self.pending = None
         self.log.warn('move', f'gantry: step_id {step_id} failed: {reason}')
         self._result(step_id, reset_id, info=f'error: {reason}')
@@ -273,10 +297,33 @@ class GantryNode:
     # --- outputs ---------------------------------------------------------------------------
 
     def _answer(self, reset_id: int, step_id: int) -> None:
+        """A reached move: the step's answer, or with a camera the photo that leads to it."""
         stamp = self.transport.now_ns()
-        self._publish('light', self._reached_light(step_id, stamp))
+        light = self._reached_light(step_id, stamp)
+        if self.photo is not None:
+            chamber = self.sim.chamber
+            request = capture_request(stamp, step_id, self.steps, self._config_payload(
+                self.seed), light, self.cfg, chamber.target, chamber.target_mask,
+                self.params.frame_id)
+            self.photo.start(reset_id, step_id, stamp, light, request, self.clock())
+            return
+        self._publish('light', light)
         truncated = self.steps >= self.cfg.episode_length
         self._result(step_id, reset_id, stamp=stamp, truncated=truncated)
+
+    def _photographed(self, shot: Shot, response: Any, failure: str) -> None:
+        """The camera answered (or did not in time): publish the step in the simulator's
+        order, the reward only from a measured photo."""
+        messages, outcome, failure = outputs(response, shot.light, shot.stamp, self.cfg, failure)
+        for key, msg in messages:
+            self._publish(key, msg)
+        truncated = self.steps >= self.cfg.episode_length
+        if failure:
+            self.log.warn('camera:step', f'gantry: step_id {shot.step_id}: no measurement '
+                          f'from the camera: {failure}')
+        self._result(shot.step_id, shot.reset_id, info=f'error: camera: {failure}'
+                     if failure else '', stamp=shot.stamp, truncated=truncated,
+                     outcome=outcome)
 
     def _reached_light(self, step_id: int, stamp: int) -> Any:
         position = self.controller.position
@@ -284,8 +331,9 @@ class GantryNode:
         return convert.light_msg(light, step_id, stamp, self.params.frame_id)
 
     def _result(self, step_id: int, reset_id: int, info: str = '', stamp: int | None = None,
-                truncated: bool = False) -> None:
-        outcome = StepOutcome(0.0, np.zeros(self.cfg.plant_count), False, truncated, 0)
+                truncated: bool = False, outcome: StepOutcome | None = None) -> None:
+        outcome = (outcome or StepOutcome(0.0, np.zeros(self.cfg.plant_count), False, False,
+                                          0))._replace(truncated=truncated)
         self._publish('result', convert.step_result_msg(
             outcome, step_id=step_id, reset_id=reset_id, step=self.steps,
             stamp_ns=self.transport.now_ns() if stamp is None else stamp,
@@ -321,7 +369,7 @@ class GantryNode:
                                       frame_id=self.params.frame_id, rate_hz=0.0,
                                       lockstep=self.params.mode == 'lockstep')
         try:
-            for t in (*INPUTS, *OUTPUTS):
+            for t in (*INPUTS, *self.outputs):
                 self._channels[t.key] = self.recorder.add_channel(
                     self.transport.resolve(t.name), t.typename, t.qos)
             self.recorder.add_metadata(METADATA_NAME, metadata)

@@ -20,7 +20,8 @@ e-stop) and hold the two latches.
    and fails the step in progress with the reason. Nothing moves or lights up until a new
    command (realtime) or a new step or reset (lockstep) arrives.
 3. The watchdog (``watchdog_s``) counts from the later of the last accepted command and the end
-   of the last move: a move in progress is not silence, a refused command is not a command.
+   of the last move or photo: a move or a step's photo in progress is not silence (the agent
+   waits for its answer), a refused command is not a command.
    When it trips, the lamp goes off and the machine holds.
 4. Nothing but a person unlocks an alarm or releases the e-stop latch (``gantry/unlock``).
 """
@@ -130,8 +131,9 @@ class Safety:
             return f'{LATCHED} (then home)'
         return self.controller.home()
 
-    def tick(self, now: float, events: list) -> None:
-        """Apply rules 2 and 3 to one poll of the controller."""
+    def tick(self, now: float, events: list, photographing: bool = False) -> None:
+        """Apply rules 2 and 3 to one poll of the controller (``photographing``: a step's
+        photo is under way)."""
         c = self.controller
         for event in events:
             if isinstance(event, Fault):
@@ -141,8 +143,8 @@ class Safety:
         if self._placing and c.reached():
             self._placing = False
             self._established('a reset or absolute command reached its target')
-        if c.busy:
-            self._last_activity = now  # a move in progress is not a silent agent
+        if c.busy or photographing:
+            self._last_activity = now  # a move or photo in progress is not a silent agent
         # --- rule 3: the watchdog
         if self.watchdog_s and c.lamp_s > 0 and not self.watchdog_tripped \
                 and now - self._last_activity > self.watchdog_s:

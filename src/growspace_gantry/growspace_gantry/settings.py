@@ -1,13 +1,15 @@
 """The gantry node's own settings (beside every ``SimConfig`` field, which decides the light).
 
 Each is declared once (``growspace_sim.core.schema.param``): its ROS parameter descriptor,
-validation and the docs' table come from the declaration.
+validation and the docs' table come from the declaration. ``python -m
+growspace_gantry.settings`` prints docs/hardware.md's table of them.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from growspace_sim.core import schema
 from growspace_sim.core.schema import Bounds, param
 from growspace_sim.node.params import check, frame_param, mode_param, seed_param
 
@@ -34,6 +36,22 @@ class GantryParams:
     frame_id: str = frame_param('chamber', 'frame of light state and step results')
     record_path: str = param('', 'MCAP file to record the hardware run to; empty = no '
                              'recording')
+    camera: str = param('', "camera_node's capture service, called after each reached move "
+                        '(lockstep): its measurement answers the step; empty = no camera: '
+                        'light/state and step_result only, reward 0',
+                        pattern=r'(|[~/A-Za-z_][A-Za-z0-9_/~{}]*)',
+                        pattern_doc='a service name such as camera/capture, or empty')
+    capture_timeout_s: float = param(10.0, 'longest wait for the capture service and its answer '
+                                     '(after photo_settle_s); then the step fails', unit='s',
+                                     bounds=Bounds(0.1, 3600.0))
+    photo_light: bool = param(False, "a white photo light on GRBL's flood coolant output: "
+                              'M8 for each photo, M9 after it and on every fault')
+    photo_settle_s: float = param(0.5, 'wait after the photo light is on before the photo',
+                                  unit='s', bounds=Bounds(0.0, 60.0))
 
     def __post_init__(self) -> None:
         check(self)
+
+
+if __name__ == '__main__':
+    print(schema.markdown_table(GantryParams))

@@ -3,7 +3,9 @@
 Level ERROR (2) for a latched e-stop, an alarm, a settings fault or a lost link; WARN (1) while
 connecting, before the first status report, while the position is not established or after
 the watchdog tripped; OK (0) only with a report in hand and nothing of the above. ``lamp_s`` is
-the S the firmware reports (its status ``FS`` field), "unknown" while no report says so.
+the S the firmware reports (its status ``FS`` field), "unknown" while no report says so;
+``photo_light`` is the last ``M8``/``M9`` GRBL accepted ("unknown" after a reset until the next),
+``photo`` where a step's photo is (empty without a camera).
 """
 
 from __future__ import annotations
@@ -61,6 +63,9 @@ def diagnostics(node: Any) -> Any:
         'estop_latched': str(node.safety.estop_latched).lower(),
         'position_established': str(node.safety.position_known).lower(),
         'watchdog_tripped': str(node.safety.watchdog_tripped).lower(),
+        'photo': '' if node.photo is None else node.photo.phase,
+        'photo_light': '' if not c.has_photo_light else
+        {True: 'on', False: 'off', None: 'unknown'}[c.photo_light_accepted],
         'last_failure': c.failure or '',
         'warnings_suppressed': '' if suppressed is None else str(suppressed),
     }

@@ -52,8 +52,8 @@ class ChamberLink:
             in-process one), in the chamber's namespace.
         with_state: also read ``plant/state`` and ``light/state`` (for ``info``); without
             them the node does not even build them.
-        with_image: wait for the step's image (a chamber without a camera, the LED gantry,
-            answers with ``light/state`` and ``step_result`` only).
+        with_image: wait for the step's image (a chamber without a camera, the LED gantry run
+            without ``camera``, answers with ``light/state`` and ``step_result`` only).
         liveness: called while waiting; raises if the node is known to be gone.
     """
 

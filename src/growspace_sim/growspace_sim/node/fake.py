@@ -33,6 +33,7 @@ class FakeTransport(LocalTransport):
         super().__init__(node_name, namespace, services=services, logger=ThrottledLogger(
             self.warnings.append, self.infos.append, throttle_s, clock=lambda: self.time_s))
         self.published: dict[str, list[tuple[Any, bytes]]] = defaultdict(list)
+        self.sequence: list[str] = []  # every topic published to, in publishing order
         self.qos: dict[str, ros_qos.QosProfile] = {}
         self.unread: set[str] = set()  # topics nobody subscribes to (has_subscribers False)
 
@@ -48,6 +49,7 @@ class FakeTransport(LocalTransport):
     def _published(self, name: str, msg: Any, cdr: bytes) -> None:
         super()._published(name, msg, cdr)
         self.published[name].append((msg, cdr))
+        self.sequence.append(name)
 
     def subscribe(self, typename: str, topic: str, qos: ros_qos.QosProfile,
                   callback: MessageCallback) -> None:
@@ -69,6 +71,10 @@ class FakeTransport(LocalTransport):
         cdr = types.serialize(msg, self.types[self.resolve(topic)])
         self.inject_raw(topic, cdr)
         return cdr
+
+    def crossing(self, msg: Any, typename: str) -> Any:
+        """Service requests and responses through the codec both ways, as over rclpy."""
+        return types.deserialize(types.serialize(msg, typename), typename)
 
     def messages(self, topic: str) -> list[Any]:
         """Everything published on ``topic`` so far."""

@@ -17,7 +17,7 @@ from typing import Any
 
 from growspace_sim.node.params import DEFAULT_NODE_NAME
 from growspace_sim.node.transport import (
-    MessageCallback, PublishFn, ServiceHandler, ThrottledLogger, guarded)
+    MessageCallback, PublishFn, ResponseCallback, ServiceHandler, ThrottledLogger, guarded)
 from growspace_sim.ros import names, qos as ros_qos, types
 
 
@@ -34,6 +34,41 @@ class LocalTimer:
     def set_period(self, period_s: float) -> None:
         self.period_s = period_s
         self.due = self._transport.time_s + period_s
+
+
+class LocalClient:
+    """A service client in process: a call runs the handler ``serve`` registered on the same
+    transport and hands its response to ``done`` at once (there is no middleware to wait on).
+
+    Args:
+        transport: The transport the server is on.
+        srv_typename: ``pkg/srv/Name``.
+        name: The service name, as the server gave it to ``serve``.
+    """
+
+    def __init__(self, transport: LocalTransport, srv_typename: str, name: str) -> None:
+        self._transport, self.srv_typename, self.name = transport, srv_typename, name
+
+    def ready(self) -> bool:
+        return self.name in self._transport.services
+
+    def call(self, request: Any, done: ResponseCallback) -> Callable[[], None]:
+        handler = self._transport.services.get(self.name)
+        if handler is None:
+            return _nothing  # no server: never answered, as over a middleware
+        t = self._transport
+        try:
+            answer = handler(t.crossing(request, f'{self.srv_typename}_Request'))
+        except Exception as e:  # noqa: BLE001 - as RclpyTransport.serve: an empty answer
+            t.logger.warn(f'srv:{self.name}', f'{self.name}: service call failed: {e}')
+            answer = types.new(f'{self.srv_typename}_Response')
+        response = t.crossing(answer, f'{self.srv_typename}_Response')
+        guarded(t.logger, f'client:{self.name}', done)(response)
+        return _nothing
+
+
+def _nothing() -> None:
+    """Cancelling a call that is already answered."""
 
 
 class LocalTransport:
@@ -101,6 +136,13 @@ class LocalTransport:
         if self._accept_services:
             self.services[name] = handler
         return self._accept_services
+
+    def client(self, srv_typename: str, name: str) -> LocalClient:
+        return LocalClient(self, srv_typename, name)
+
+    def crossing(self, msg: Any, typename: str) -> Any:
+        """A message as it arrives at the other end of a service call (in process: itself)."""
+        return msg
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> LocalTimer:
         timer = LocalTimer(self, period_s, guarded(self.logger, 'timer', callback))

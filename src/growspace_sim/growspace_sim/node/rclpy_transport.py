@@ -25,7 +25,7 @@ from typing import Any
 
 from growspace_sim.node.params import ParamSpec
 from growspace_sim.node.transport import (
-    MessageCallback, PublishFn, ServiceHandler, ThrottledLogger, guarded)
+    MessageCallback, PublishFn, ResponseCallback, ServiceHandler, ThrottledLogger, guarded)
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import NAMES
 
@@ -50,6 +50,59 @@ class RclpyTimer:
     def set_period(self, period_s: float) -> None:
         self._timer.timer_period_ns = max(1, round(period_s * 1e9))
         self._timer.reset()  # the next call is one new period from now
+
+
+class RclpyClient:
+    """A ``ServiceClient`` on an rclpy client: ``call_async``, the answer handled by the
+    transport's executor when it arrives (the caller's loop never waits on it)."""
+
+    def __init__(self, client: Any, srv: Any, srv_typename: str,
+                 logger: ThrottledLogger) -> None:
+        self._client, self._srv, self.srv_typename = client, srv, srv_typename
+        self._logger = logger
+        self._where = client.srv_name
+
+    def ready(self) -> bool:
+        return self._client.service_is_ready()
+
+    def call(self, request: Any, done: ResponseCallback) -> Callable[[], None]:
+        from rclpy.serialization import deserialize_message
+
+        where, typename = self._where, f'{self.srv_typename}_Response'
+        safe = guarded(self._logger, f'client:{where}', done)
+        future = self._client.call_async(deserialize_message(
+            types.serialize(request, f'{self.srv_typename}_Request'), self._srv.Request))
+
+        def finished(f: Any) -> None:
+            if f.cancelled():
+                return
+            if f.exception() is not None:
+                self._logger.warn(f'client:{where}', f'{where}: call failed: {f.exception()}')
+                return
+            try:
+                response = from_rclpy(f.result(), typename)
+            except types.CdrError as e:
+                self._logger.warn(f'client:{where}', f'{where}: dropped a malformed answer: {e}')
+                return
+            safe(response)
+        future.add_done_callback(finished)
+
+        def cancel() -> None:
+            self._client.remove_pending_request(future)
+            future.cancel()
+        return cancel
+
+
+def from_rclpy(msg: Any, typename: str) -> Any:
+    """An rclpy message (a service's request or response) as our codec's message.
+
+    Raises:
+        types.CdrError: rclpy's bytes do not decode as ``typename``.
+    """
+    from rclpy.serialization import serialize_message
+
+    # rmw_serialize sizes the bytes by Fast CDR's estimate, which may run past the data.
+    return types.deserialize(serialize_message(msg), typename, any_tail=True)
 
 
 def parameter_descriptor(spec: ParamSpec, mode: str) -> Any:
@@ -222,13 +275,13 @@ class RclpyTransport:
         return endpoint is not None and endpoint.get_publisher_count() > 0
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
-        from rclpy.serialization import deserialize_message, serialize_message
+        from rclpy.serialization import deserialize_message
 
         srv = interface_class(srv_typename)
 
         def call(request: Any, response: Any) -> Any:
             try:
-                req = types.deserialize(serialize_message(request), f'{srv_typename}_Request')
+                req = from_rclpy(request, f'{srv_typename}_Request')
                 answer = handler(req)
                 return deserialize_message(
                     types.serialize(answer, f'{srv_typename}_Response'), srv.Response)
@@ -237,6 +290,10 @@ class RclpyTransport:
                 return response
         self.node.create_service(srv, name, call)
         return True
+
+    def client(self, srv_typename: str, name: str) -> RclpyClient:
+        srv = interface_class(srv_typename)
+        return RclpyClient(self.node.create_client(srv, name), srv, srv_typename, self.logger)
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> RclpyTimer:
         return RclpyTimer(self.node.create_timer(period_s, guarded(self.logger, 'timer',

@@ -20,6 +20,7 @@ from growspace_sim.ros import qos as ros_qos
 
 MessageCallback = Callable[[Any, bytes], None]  # (rosbags message, CDR bytes as received)
 ServiceHandler = Callable[[Any], Any]  # rosbags request -> rosbags response
+ResponseCallback = Callable[[Any], None]  # called with the rosbags response of a call
 PublishFn = Callable[[Any], bytes]  # publishes a message, returns the CDR bytes written
 THROTTLE_S = 2.0  # one warning per key and period; a flood must not flood the log
 
@@ -97,6 +98,18 @@ class Timer(Protocol):
         """Call the callback every ``period_s`` seconds from now on [s]."""
 
 
+class ServiceClient(Protocol):
+    """The calling end of a service, asynchronous: a call never blocks the caller."""
+
+    def ready(self) -> bool:
+        """Whether a server of the service is there to answer now."""
+
+    def call(self, request: Any, done: ResponseCallback) -> Callable[[], None]:
+        """Send ``request``; ``done(response)`` runs once the answer arrives (while spinning,
+        or at once in process), never if the call is cancelled or never answered (timeouts are
+        the caller's). Returns a function that cancels the call."""
+
+
 class Transport(Protocol):
     """What the node needs from a middleware: typed pub/sub with CDR bytes, timers, a clock."""
 
@@ -120,6 +133,9 @@ class Transport(Protocol):
 
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         """Offer a service; returns False where the middleware cannot."""
+
+    def client(self, srv_typename: str, name: str) -> ServiceClient:
+        """The calling end of a service (``gantry_node`` calls ``camera/capture``)."""
 
     def create_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """Call ``callback`` every ``period_s`` seconds while spinning."""

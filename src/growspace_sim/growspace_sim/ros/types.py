@@ -318,7 +318,7 @@ def _cdr_readers(typename: str) -> tuple[Any, Any, type]:
     return msgdef.deserialize_cdr_le, msgdef.deserialize_cdr_be, msgdef.cls
 
 
-def deserialize(data: bytes | memoryview, typename: str) -> Any:
+def deserialize(data: bytes | memoryview, typename: str, any_tail: bool = False) -> Any:
     """Decode CDR bytes (encapsulation header included) into a message.
 
     Data from the network is untrusted, so every failure comes out as one exception type.
@@ -328,6 +328,10 @@ def deserialize(data: bytes | memoryview, typename: str) -> Any:
             pads some messages to 8 bytes, beyond the 3 that ``Typestore.deserialize_cdr``
             accepts (tests/test_msgs_wire.py).
         typename: The expected message type name.
+        any_tail: Accept any number of bytes after the message: only for bytes from
+            ``rclpy.serialization.serialize_message`` in this process, whose length is Fast
+            CDR's size estimate, 8 or 16 bytes beyond the data for some nested messages
+            (measured on ``Capture_Response``; ``rclpy_transport.from_rclpy``).
 
     Returns:
         The message.
@@ -342,7 +346,7 @@ def deserialize(data: bytes | memoryview, typename: str) -> Any:
         msg, end = (read_le if data[1] else read_be)(memoryview(data)[4:], 0, cls, typestore())
     except Exception as exc:  # noqa: BLE001 - any decoder failure means malformed input
         raise CdrError(f'Malformed CDR for {typename} ({len(data)} B): {exc}') from exc
-    if not 0 <= len(data) - 4 - end <= 7:
+    if not 0 <= len(data) - 4 - end <= (len(data) if any_tail else 7):
         raise CdrError(f'Malformed CDR for {typename} ({len(data)} B): {len(data) - 4 - end} '
                        f'bytes after the message; at most 7 pad bytes are allowed.')
     return msg
