@@ -45,7 +45,8 @@ def sim_node(tmp_path: Path, *args: str) -> NodeProcess:
 def test_a_lockstep_episode_replays_from_its_reset_one_step_at_a_time(tmp_path, capsys):
     node = sim_node(tmp_path)
     try:
-        code = main(['play', str(BAG), '--step-period', '0.05', '--wait', '20'])
+        code = main(['play', str(BAG), '--step-period', '0.05', '--wait', '20',
+                     '--step-timeout', '60'])
     finally:
         node.stop(signal.SIGINT)
     out, err = capsys.readouterr()
@@ -67,7 +68,8 @@ def test_chosen_steps_start_where_the_recording_had_the_light(tmp_path, capsys):
     node = sim_node(tmp_path)
     try:
         code = main(['play', str(BAG), '--step-period', '1.2', '--episode', '0',
-                     '--start-step', '20', '--stop-step', '21', '--wait', '20'])
+                     '--start-step', '20', '--stop-step', '21', '--wait', '20',
+                     '--step-timeout', '60'])
     finally:
         node.stop(signal.SIGINT)
     out, err = capsys.readouterr()

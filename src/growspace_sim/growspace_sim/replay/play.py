@@ -14,11 +14,12 @@ from typing import Any
 from growspace_sim.recording.scan import Damage
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import Episode, read_episodes
-from growspace_sim.ros import types
+from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 
 WAITING_NOTE_S = 60.0  # while a step takes longer than this, say so this often [s]
 NODE_GONE_S = 5.0  # no publisher of step_result for this long: the node left [s]
+MATCH_SETTLE_S = 0.5  # after the node's endpoints match ours, before the first request [s]
 
 
 def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[str] | None = None,
@@ -167,13 +168,23 @@ def play_steps(path: str | os.PathLike, *, episode: int | None = None, start_ste
         results: list[Any] = []
         transport.subscribe(types.STEP_RESULT, f'{prefix}step_result', OBSERVATION_QOS,
                             lambda msg, cdr: results.append(msg))
+        # Each side sees a match on its own: the node's step_result writer may not know our
+        # reader yet when ours knows it, and would drop its answer to our first request. Its
+        # latched chamber/config arriving shows its writers have matched ours (as the bridge
+        # connects), and a short settle covers the rest.
+        configs: list[Any] = []
+        transport.subscribe(types.STRING, f'{prefix}chamber/config', ros_qos.LATCHED,
+                            lambda msg, cdr: configs.append(msg))
         names = (f'{prefix}reset', f'{prefix}light/command', f'{prefix}step_result')
         deadline = time.monotonic() + wait_for_subscribers_s
-        while not all(map(transport.matched, names)):
+        while not (all(map(transport.matched, names)) and configs):
             if time.monotonic() > deadline:
                 raise ReplayError(f'no node answers on {prefix}step_result within '
                                   f'{wait_for_subscribers_s:g} s (is it running, in lockstep '
                                   f'mode, in namespace {prefix.rstrip("/") or "/"}?)')
+            transport.spin_once(0.05)
+        settle = time.monotonic() + MATCH_SETTLE_S
+        while time.monotonic() < settle:
             transport.spin_once(0.05)
         next_at = time.monotonic()
         for ep, plan in zip(episodes, plans):
