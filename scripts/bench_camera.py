@@ -11,7 +11,9 @@ Fixed method (every draw seeded, so a run is repeatable):
    IoU of the plant channel of the camera's observation against the simulator's own
    observation; for each simulator tip, whether a measured tip lies within 1 cm; |reward
    difference|. A photo the pipeline refuses counts as IoU 0, every tip missed and a reward of
-   0 (refusals are listed too).
+   0 (refusals are listed too). For scale, the same IoU of the simulator's own plants redrawn
+   by the camera's ``measured_state`` + ``Observer`` with every node moved by a seeded
+   0.25 mm or 1 mm normal error (the metric floor: what a measurement that good scores).
 2. Closed loop. Per challenge, ``--loop-episodes`` episodes (half easy, half hard, seeds
    2000..): the simulator's oracle policy acts on ``oracle_view.oracle_chamber`` built (a)
    from the simulator's own plants and (b) from the camera's measurement of a twin photo taken
@@ -40,8 +42,9 @@ import time
 import cv2
 import numpy as np
 
-from growspace_camera.measure import Target
+from growspace_camera.measure import measured_state, Observer, Target
 from growspace_camera.markers import MarkerLayout
+from growspace_camera.nodes import PlantTree
 from growspace_camera.oracle_view import oracle_chamber, plant_view
 from growspace_camera.pipeline import Pipeline
 from growspace_camera.twin import PhotoTwin
@@ -53,6 +56,8 @@ from growspace_sim.simulation import Simulation
 PHOTO_STEPS = (6, 12, 18, 24, 30, 36, 42, 48, 50)
 ROUNDS = 3  # speed rounds; the fastest round's medians are reported
 CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
+FLOOR_MM = (0.25, 1.0)  # node errors for the metric's floor (see _moved_iou) [mm]
+_OBSERVER = Observer()
 
 
 def target_of(sim: Simulation) -> Target:
@@ -82,8 +87,29 @@ def fidelity(episodes: int, twin: PhotoTwin) -> list[dict]:
                     photo = twin.photo(sim.chamber, seed=seed * 100 + step)
                     m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
                                      sim.chamber.steps)
-                    rows.append(_compare(challenge, setting, seed, step, sim, outcome, m))
+                    row = _compare(challenge, setting, seed, step, sim, outcome, m)
+                    for sigma_mm in FLOOR_MM:
+                        row[f'floor_iou_{sigma_mm}mm'] = _moved_iou(sim, sigma_mm * 1e-3,
+                                                                     seed * 100 + step)
+                    rows.append(row)
     return rows
+
+
+def _moved_iou(sim: Simulation, sigma_m: float, seed: int) -> float:
+    """IoU of the simulator's observation against its own plants redrawn by the camera's
+    ``measured_state`` and ``Observer`` with every node moved by a seeded normal error of
+    ``sigma_m`` per axis (roots stay on the floor): what the metric gives a measurement that
+    good, the floor the camera's IoU is read against."""
+    c, cfg = sim.chamber, sim.cfg
+    n = c.n_nodes
+    nodes = np.column_stack((c.pos[:n].real, c.pos[:n].imag))
+    nodes += np.random.default_rng(seed).normal(0.0, sigma_m, nodes.shape)
+    nodes[:cfg.plant_count, 1] = 0.0
+    tree = PlantTree(nodes, c.parent[:n].astype(np.int32), c.plant[:n].astype(np.int16),
+                     np.zeros(0, np.int64), cfg.plant_count, 0, (), 0)
+    state = measured_state(tree, cfg, c.light.copy(), target_of(sim), c.steps)
+    seen, truth = _OBSERVER.image(state, cfg)[..., 1] > 0, sim.observe()[..., 1] > 0
+    return np.count_nonzero(truth & seen) / max(1, np.count_nonzero(truth | seen))
 
 
 def _cell_line(cell: list[dict]) -> str:
@@ -93,8 +119,12 @@ def _cell_line(cell: list[dict]) -> str:
     tips = sum(r['tips_1cm'] for r in cell) / max(1, sum(r['sim_tips'] for r in cell))
     precision = sum(r['tip_precision'] for r in ok) / max(1, sum(r['cam_tips'] for r in ok))
     mae = np.mean([abs(r['sim_reward'] - r['cam_reward']) for r in cell])
+    floor = ', '.join(f'{mm} mm {np.mean([r[f"floor_iou_{mm}mm"] for r in cell]):.3f} / '
+                      f'{np.percentile([r[f"floor_iou_{mm}mm"] for r in cell], 5):.3f}'
+                      for mm in FLOOR_MM)
     return (f'iou mean {np.mean(iou):.3f} p5 {np.percentile(iou, 5):.3f}, tips {tips:.3f} '
-            f'(precision {precision:.3f}), reward mae {mae:.4f}, refused {len(cell) - len(ok)}')
+            f'(precision {precision:.3f}), reward mae {mae:.4f}, refused {len(cell) - len(ok)}'
+            f"; the simulator's own plants with nodes moved by {floor}")
 
 
 def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation,
@@ -248,6 +278,10 @@ def main(argv: list[str] | None = None) -> int:
         for setting in ('easy', 'hard'):
             cell = [r for r in rows if r['challenge'] == challenge and r['setting'] == setting]
             print(f'  {challenge:10s} {setting}: ' + _cell_line(cell))
+    for mm in FLOOR_MM:
+        floor = np.array([r[f'floor_iou_{mm}mm'] for r in rows])
+        print(f"metric floor: the simulator's own plants, nodes moved by {mm} mm: iou mean "
+              f'{floor.mean():.3f} p5 {np.percentile(floor, 5):.3f}')
     for r in refused:
         print(f'  refused: {r["challenge"]} {r["setting"]} seed {r["seed"]} step {r["step"]}: '
               f'{r["error"]}')

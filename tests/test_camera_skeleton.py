@@ -21,13 +21,16 @@ SPACING = 0.05
 
 
 def mask_of(*polylines: list[tuple[float, float]], width_m: float = 0.012) -> np.ndarray:
-    """A mask with each polyline (x, z in m) drawn as a stem ``width_m`` wide."""
+    """A mask with each polyline (x, z in m) drawn as a stem ``width_m`` wide, its last point
+    the centre of a round end (as a twig's tip is round)."""
     mask = np.zeros(GRID.shape, np.uint8)
     for line in polylines:
         points = np.array([((x / GRID.pixel_m - 0.5) * 16, ((0.2 - z) / GRID.pixel_m - 0.5)
                             * 16) for x, z in line], np.int32)
         cv2.polylines(mask, [points], False, 1, int(round(width_m / GRID.pixel_m)),
                       cv2.LINE_8, 4)
+        cv2.circle(mask, tuple(int(v) for v in points[-1]),
+                   int(round(0.5 * width_m / GRID.pixel_m * 16)), 1, -1, cv2.LINE_8, 4)
     return mask.astype(bool)
 
 
@@ -39,20 +42,13 @@ def near(points: np.ndarray, point: tuple[float, float], tol: float = 0.004) -> 
     return bool(np.any(np.hypot(*(np.asarray(points) - point).T) < tol))
 
 
-def cap(start: tuple[float, float], end: tuple[float, float],
-        width_m: float = 0.012) -> tuple[float, float]:
-    """Where a drawn stem's mask ends: OpenCV's round cap reaches half its width beyond."""
-    d = np.subtract(end, start)
-    return tuple(np.add(end, 0.5 * width_m * d / np.hypot(*d)))
-
-
 def test_a_straight_stem_is_one_plant_with_nodes_every_spacing_and_its_tip():
     tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.15)]))
     assert tree.plants == 1 and tree.tips.size == 1 and tree.tips_pruned == 0
     assert tree.nodes[0] == pytest.approx((0.1, 0.0), abs=0.002)  # the root, on the floor
     for z in (0.05, 0.10):
         assert near(tree.nodes, (0.1, z))
-    assert tree.nodes[tree.tips[0]] == pytest.approx(cap((0.1, 0.1), (0.1, 0.15)), abs=0.003)
+    assert tree.nodes[tree.tips[0]] == pytest.approx((0.1, 0.15), abs=0.003)
     assert tree.parent[0] == -1 and np.all(tree.parent[1:] < np.arange(1, len(tree.parent)))
     assert set(tree.plant) == {0}
 
@@ -61,15 +57,15 @@ def test_a_corner_gets_its_node_where_the_stem_turns():
     tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.16, 0.13)]))
     assert tree.tips.size == 1
     assert near(tree.nodes, (0.1, 0.1), 0.003)  # the corner, not a rounded-off point
-    assert tree.nodes[tree.tips[0]] == pytest.approx(cap((0.1, 0.1), (0.16, 0.13)), abs=0.003)
+    assert tree.nodes[tree.tips[0]] == pytest.approx((0.16, 0.13), abs=0.003)
 
 
 def test_a_fork_has_two_tips_and_one_shared_node():
     tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.05, 0.15)], [(0.1, 0.1), (0.15, 0.15)]))
     assert tree.plants == 1 and tree.tips.size == 2
     tips = tree.nodes[tree.tips]
-    assert near(tips, cap((0.1, 0.1), (0.05, 0.15)))
-    assert near(tips, cap((0.1, 0.1), (0.15, 0.15)))
+    assert near(tips, (0.05, 0.15))
+    assert near(tips, (0.15, 0.15))
     fork = [i for i in range(len(tree.parent)) if np.count_nonzero(tree.parent == i) == 2]
     assert len(fork) == 1 and tree.nodes[fork[0]] == pytest.approx((0.1, 0.1), abs=0.005)
 
@@ -90,8 +86,8 @@ def test_two_stems_are_two_plants_left_to_right():
     assert tree.nodes[1, 0] == pytest.approx(0.15, abs=0.003)
     tips = tree.nodes[tree.tips]
     assert sorted(tree.plant[tree.tips]) == [0, 1]
-    assert near(tips, cap((0.04, 0.05), (0.06, 0.1)))
-    assert near(tips, cap((0.15, 0.0), (0.15, 0.12)))
+    assert near(tips, (0.06, 0.1))
+    assert near(tips, (0.15, 0.12))
 
 
 def test_crossing_branches_still_make_a_tree_of_one_plant():
@@ -99,7 +95,7 @@ def test_crossing_branches_still_make_a_tree_of_one_plant():
                            [(0.1, 0.06), (0.16, 0.1), (0.06, 0.12)]))
     assert tree.plants == 1
     assert np.all(tree.parent[1:] < np.arange(1, len(tree.parent)))
-    assert near(tree.nodes[tree.tips], cap((0.1, 0.06), (0.04, 0.16)))
+    assert near(tree.nodes[tree.tips], (0.04, 0.16))
 
 
 def test_a_loose_piece_of_plant_is_counted_not_attached():
@@ -117,3 +113,22 @@ def test_no_plant_is_an_error_not_an_empty_answer(mask, match):
     with pytest.raises(CameraError, match=match) as e:
         tree_of(mask)
     assert e.value.code == NO_PLANT
+
+
+@pytest.mark.parametrize('width_m', [0.008, 0.012, 0.02])
+def test_a_round_tip_is_the_centre_of_its_end_not_the_masks_edge(width_m):
+    # The node a branch ends at is the centre of its round end; the mask reaches half the
+    # stem's width beyond it (4 to 10 mm here).
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.16, 0.13)], width_m=width_m))
+    assert tree.tips.size == 1
+    assert np.hypot(*(tree.nodes[tree.tips[0]] - (0.16, 0.13))) < 0.0025
+
+
+def test_a_stem_an_even_number_of_pixels_wide_is_measured_on_its_axis():
+    # Thinning keeps one of the two middle columns (half a pixel, 1 mm, off the axis); the
+    # nodes must lie on the axis itself, here on a pixel border at x = 0.1 m.
+    mask = np.zeros(GRID.shape, bool)
+    mask[20:, 47:53] = True  # 6 pixels wide: columns 47-52, axis between 49 and 50
+    tree = tree_of(mask)
+    assert tree.plants == 1 and len(tree.nodes) >= 4
+    assert np.abs(tree.nodes[:, 0] - 0.1).max() < 0.0003

@@ -12,13 +12,15 @@ from types import SimpleNamespace
 import cv2
 import numpy as np
 import pytest
+from skimage.filters import apply_hysteresis_threshold
 
 from growspace_camera.calibration import Calibrator, fit_plane
 from growspace_camera.errors import CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import Target
+from growspace_camera.oracle_view import candidate_points, oracle_chamber, plant_view
 from growspace_camera.pipeline import overlay, Pipeline
-from growspace_camera.segment import exposure, SegmentParams
+from growspace_camera.segment import _hysteresis, exposure, plant_mask, SegmentParams
 from growspace_camera.sheet import sheet_pages
 from growspace_camera.twin import look_at_plane, PhotoTwin, TwinJitter
 from growspace_sim.core.config import SimConfig
@@ -171,6 +173,38 @@ def test_an_empty_pot_is_no_plant_not_a_reward(chamber):
     assert list(m.confidence.markers_seen) == list(LAYOUT.ids)  # the photo itself was fine
 
 
+@pytest.mark.parametrize('axis_px', [40.0, 40.25, 40.5, 40.625])
+def test_plant_cover_places_a_blurred_stem_to_a_fraction_of_a_pixel(axis_px):
+    # A rectified photo drawn 8 times finer and shrunk: grey backdrop, a green stem 5 pixels
+    # wide whose axis is at ``axis_px`` (pixel centres), blurred as a lens and a warp do.
+    fine = np.full((800, 800, 3), 150.0, np.float32)
+    left = int((axis_px - 2.0) * 8)
+    fine[:, left:left + 40] = (60.0, 140.0, 70.0)
+    photo = cv2.GaussianBlur(cv2.resize(fine, (100, 100), interpolation=cv2.INTER_AREA),
+                             (0, 0), 0.8)
+    seg = plant_mask(photo, SegmentParams())
+    row = seg.coverage[50].astype(float)
+    assert 5 <= seg.mask[50].sum() <= 8 and row.max() == pytest.approx(1.0, abs=0.05)
+    assert row @ np.arange(100) / row.sum() == pytest.approx(axis_px, abs=0.1)
+    assert not seg.coverage[:, :30].any()  # nothing far from the plant
+
+
+def test_hysteresis_is_scikit_images():
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        exg = cv2.GaussianBlur(rng.standard_normal((120, 160)).astype(np.float32), (0, 0), 2)
+        assert np.array_equal(_hysteresis(exg, 0.1, 0.3).astype(bool),
+                              apply_hysteresis_threshold(exg, 0.1, 0.3))
+
+
+def test_the_oracles_view_has_no_candidate_photon_where_the_plant_used_them_up(chamber):
+    cfg, sim = chamber.cfg, chamber.sim.chamber
+    view = oracle_chamber(plant_view(sim.state), cfg)
+    gap = np.abs(view.photons[:, None] - sim.pos[:sim.n_nodes][None, :]).min(axis=1)
+    assert gap.min() >= cfg.width_m(cfg.kill_distance)
+    assert 0 < len(view.photons) < len(candidate_points(cfg))
+
+
 # --- the twin and a whole photo --------------------------------------------------------------
 
 def test_twin_photos_are_deterministic_by_seed(chamber):
@@ -224,3 +258,44 @@ def test_hidden_markers_after_a_good_photo_hold_the_fit_and_say_so(chamber, phot
     assert abs(hidden.state.nearest[0] - c.state.nearest[0]) < 0.005
     fresh = measure(Pipeline(), chamber, twin.photo(c, seed=2, hidden=(2, 3)).bgr)
     assert not fresh.ok and fresh.error.code == MARKERS and fresh.reward == 0.0
+
+
+def test_fixed_twin_photos_give_the_simulators_plant_and_tips_within_bounds():
+    """Eight seeded twin photos over the four challenges (not timed): the camera's plant
+    image against the simulator's, its tips, and where along a branch a tip is put."""
+    twin, ious, hit, total, along = PhotoTwin(LAYOUT), {}, 0, 0, []
+    for challenge, setting in (('control', 'hard'), ('find_plant', 'easy'),
+                               ('fairness', 'hard'), ('shape', 'easy')):
+        cfg = SimConfig(challenge=challenge, setting=setting)
+        sim = Simulation(cfg)
+        sim.reset(seed=21)
+        oracle, pipeline = cfg.task.oracle(), Pipeline()
+        for step in range(1, 31):
+            sim.apply_discrete(oracle.act(sim.chamber))
+            sim.step()
+            if step % 15:
+                continue
+            c = sim.chamber
+            m = pipeline.measure(twin.photo(c, seed=step).bgr, cfg, c.light.copy(),
+                                 Target(c.target, c.target_mask), c.steps)
+            assert m.ok, m.error
+            a, b = sim.observe()[..., 1] > 0, m.observation[..., 1] > 0
+            ious.setdefault(challenge, []).append(np.count_nonzero(a & b)
+                                                  / np.count_nonzero(a | b))
+            seen = m.tree.nodes[m.tree.tips]
+            n = c.n_nodes
+            has_child = np.zeros(n, bool)
+            has_child[c.parent[:n][c.parent[:n] >= 0]] = True
+            for i in np.flatnonzero(~has_child & (c.parent[:n] >= 0)):
+                total += 1
+                d = np.hypot(*(seen - (c.pos[i].real, c.pos[i].imag)).T)
+                if d.min() < 0.01:
+                    hit += 1
+                    branch = c.pos[i] - c.pos[c.parent[i]]
+                    offset = complex(*seen[np.argmin(d)]) - c.pos[i]
+                    along.append((offset / (branch / abs(branch))).real)
+    print({k: np.round(v, 3) for k, v in ious.items()}, hit / total, np.mean(along))
+    assert np.mean([v for k, v in ious.items() if k != 'shape']) >= 0.85
+    assert min(min(v) for v in ious.values()) >= 0.5
+    assert hit / total >= 0.8
+    assert abs(np.mean(along)) < 0.001  # a tip is its branch's end, not the mask's edge

@@ -21,6 +21,8 @@ from growspace_camera.segment import Grid
 from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
 
 DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
+STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
+CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
 
 
@@ -50,7 +52,7 @@ class PlantTree:
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
-                 params: TreeParams) -> PlantTree:
+                 params: TreeParams, coverage: np.ndarray | None = None) -> PlantTree:
     """The plants of a mask, as trees of nodes ``first_m`` then ``spacing_m`` apart.
 
     Args:
@@ -59,11 +61,13 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
         first_m: Arc length of the first node above a root [m] (the initial stem).
         spacing_m: Arc length between later nodes [m] (a segment).
         params: Base band, spur pruning, corners.
+        coverage: Plant cover per pixel (``Segmentation.coverage``) for sub-pixel stem
+            centres; None: the mask's own pixels.
 
     Raises:
         CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
     """
-    g = skeleton_graph(mask, grid, params)
+    g = skeleton_graph(mask, grid, params, coverage)
     builder = _Builder(g, mask, grid, first_m / grid.pixel_m, spacing_m / grid.pixel_m)
     # Where a loop (branches crossing in the plane) was cut into a tree, the path ends
     # without an end point: it gets a node too, so the loop is drawn whole.
@@ -105,9 +109,11 @@ class _Run:
     was: tuple[np.ndarray, np.ndarray] = ()  # its ends before the corners were refined
 
 
-def _line(run: _Run, nodes: list, radius_at) -> tuple[np.ndarray, np.ndarray] | None:  # noqa: ANN001
+def _line(run: _Run, nodes: list, radius_at,  # noqa: ANN001
+          pixel_m: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(point, unit direction) fitted to a run's pixels away from both of its ends, where the
-    stems they meet bend its skeleton; None when too little of it is left."""
+    stems they meet bend its skeleton; None when too little of it is left or it is not
+    straight (its pixels further than ``STRAIGHT_PX`` from the line, RMS)."""
     a, b = np.array(nodes[run.start]), np.array(nodes[run.end])
     trim_a, trim_b = radius_at(run.start) + 0.004, run.end_radius + 0.004
     points = run.pixels
@@ -118,7 +124,9 @@ def _line(run: _Run, nodes: list, radius_at) -> tuple[np.ndarray, np.ndarray] | 
     if len(points) < 5:
         return None
     centre = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    _, spread, vt = np.linalg.svd(points - centre, full_matrices=False)
+    if spread[1] > STRAIGHT_PX * pixel_m * np.sqrt(len(points)):
+        return None  # the run bends (at a node the walk did not see as a corner): no line
     direction = vt[0] if np.dot(vt[0], b - a) >= 0 else -vt[0]
     return centre, direction
 
@@ -165,11 +173,14 @@ class _Builder:
         out: dict[int, list[_Run]] = {}
         for run in self.runs:
             out.setdefault(run.start, []).append(run)
-        lines = {id(run): _line(run, self.nodes, self.radius_at) for run in self.runs}
+        lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m)
+                 for run in self.runs}
         for run in self.runs:
             run.was = (np.array(self.nodes[run.start]), np.array(self.nodes[run.end]))
+        placed = self._first_nodes(lines, limit_m)
         for node, arriving in into.items():
-            if node in self.tips or arriving.start < 0 or lines[id(arriving)] is None:
+            if node in self.tips or node in placed or arriving.start < 0 \
+                    or lines[id(arriving)] is None:
                 continue
             best = None
             for leaving in out.get(node, ()):
@@ -182,7 +193,11 @@ class _Builder:
             if best is None:
                 continue
             corner = _intersect(lines[id(arriving)], best[1])
-            if corner is not None and np.hypot(*(corner - self.nodes[node])) < limit_m:
+            # A rounded corner is off by about the stem's radius, and the node is on the stem:
+            # a crossing farther out comes from a run that is not straight after all.
+            reach = min(limit_m, 2.0 * self.radius_at(node) + 2.0 * self.pixel_m)
+            if corner is not None and np.hypot(*(corner - self.nodes[node])) < reach \
+                    and self._on_plant(corner):
                 self.nodes[node] = (float(corner[0]), float(corner[1]))
         for run in self.runs:  # nodes between two ends follow them, the nearer one more
             moved_a = np.array(self.nodes[run.start]) - run.was[0]
@@ -190,6 +205,34 @@ class _Builder:
             for k, t in zip(run.inner, run.fractions[:-1]):
                 self.nodes[k] = tuple(np.array(self.nodes[k]) + (1 - t) * moved_a
                                       + t * moved_b)
+
+    def _first_nodes(self, lines: dict, limit_m: float) -> set[int]:
+        """Put the first node of each stem one first segment up its fitted line.
+
+        Where the first stem ends in a junction or a corner, the skeleton's fork sits off the
+        node by up to the stem's radius (thick there: the whole plant is above it), and the
+        first segment's length is known (``first_branch_height``). Its line, fitted away
+        from both ends, gives the direction. Returns the nodes so placed.
+        """
+        placed = set()
+        for run in self.runs:
+            line = lines[id(run)]
+            if self.parent[run.start] >= 0 or run.inner or run.end in self.tips \
+                    or line is None:
+                continue
+            root = np.array(self.nodes[run.start])
+            node = root + self.first * self.pixel_m * line[1]
+            if np.hypot(*(node - self.nodes[run.end])) < limit_m:
+                self.nodes[run.end] = (float(node[0]), float(node[1]))
+                placed.add(run.end)
+        return placed
+
+    def _on_plant(self, xz: np.ndarray) -> bool:
+        """Whether a point (x, z) [m] lies on the mask."""
+        rows, cols = self.mask.shape
+        row = int(np.floor(rows - xz[1] / self.pixel_m))
+        col = int(np.floor(xz[0] / self.pixel_m))
+        return 0 <= row < rows and 0 <= col < cols and bool(self.mask[row, col])
 
     def radius_at(self, node: int) -> float:
         """The mask radius at a node's skeleton pixel [m] (0 for a placed-between node)."""
@@ -227,7 +270,7 @@ class _Builder:
             position = self._tip(p)
             reach += float(np.hypot(*(position - g.xz[p]))) / self.pixel_m
         expected = self.first if from_root else self.spacing
-        if not is_end and reach < 0.5 * expected:
+        if not is_end and reach < CORNER_MIN * expected:
             return  # the same node seen again (a junction's cluster, a corner's shoulder)
         if from_root:
             count = 1 + max(0, round((reach - self.first) / self.spacing))
@@ -261,8 +304,8 @@ class _Builder:
             p = int(g.pred[p])
         pixels.reverse()
         s = [0.0] + [self.since[k] for k in pixels] + [reach]
-        xz = [self.nodes[last]] + [tuple(g.xz[k]) for k in pixels] + [tuple(end)]
-        return np.maximum.accumulate(np.array(s)), np.array(xz)
+        xz = np.vstack((self.nodes[last], g.xz[pixels].reshape(-1, 2), end))
+        return np.maximum.accumulate(np.array(s)), xz
 
     def _add(self, x: float, z: float, parent: int) -> int:
         self.nodes.append((float(x), float(z)))
@@ -272,9 +315,9 @@ class _Builder:
         return len(self.nodes) - 1
 
     def _tip(self, end: int) -> np.ndarray:
-        """Where the mask ends beyond a skeleton end point (x, z) [m]: its pixels farthest
-        along the branch's direction, within a few radii of the end (thinning leaves the
-        skeleton's end short of the tip, and often hooked to one side)."""
+        """The tip beyond a skeleton end point (x, z) [m]: the mask's pixels farthest along the
+        branch's direction, within a few radii of the end (thinning leaves the skeleton's
+        end short of the tip, and often hooked to one side), less the end's radius."""
         g, p = self.g, end
         for _ in range(DIRECTION_PX):
             if g.pred[p] < 0:
@@ -300,4 +343,8 @@ class _Builder:
             return g.xz[end]
         along = np.where(mine, along, -np.inf)
         apex = offset[along >= along.max() - 0.5 * self.pixel_m]
-        return g.xz[end] + apex.mean(axis=0)
+        # A tip is round: its node is the centre of its end, the end's radius inside the
+        # mask's edge. The apex pixels' centres lie half a pixel inside that edge, and the
+        # distance transform counts to the background pixel's centre half a pixel beyond it.
+        back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
+        return g.xz[end] + apex.mean(axis=0) - back * d

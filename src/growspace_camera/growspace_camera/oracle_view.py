@@ -4,8 +4,9 @@ The simulator's oracles (``core/tasks/``) read a ``Chamber``: its plants, light 
 and its photons (the simulator's light model: which points would attract growth). A photo
 shows no photons, so ``oracle_chamber`` builds a chamber from a plant state (a camera's
 measurement, or the simulator's own plants for comparison) whose photons are *candidates*: the
-centres of the observation's pixels above the chamber's photon floor that are not under the
-plant's canopy (the light shines from above). The oracles' code then runs unchanged on
+centres of the observation's pixels above the chamber's photon floor and farther than the
+kill distance from every node (the simulator uses photons up there), with the plant's canopy
+for shading (the light shines from above). The oracles' code then runs unchanged on
 measured quantities only; with the simulator's plant in the same view the same policy gives
 the reference return that the camera's return is compared with (scripts/bench_camera.py).
 """
@@ -58,8 +59,8 @@ def oracle_chamber(state: ChamberState, cfg: SimConfig, light: Light | None = No
         light: The light as reached (default: the state's).
 
     Returns:
-        A ``Chamber`` whose state holds those plants, the candidates as photons and the
-        canopy of the plants as they are now (shading).
+        A ``Chamber`` whose state holds those plants, the candidates not used up as photons
+        and the canopy of the plants as they are now (shading).
     """
     chamber = Chamber(cfg)
     view = plant_view(state)
@@ -77,6 +78,11 @@ def oracle_chamber(state: ChamberState, cfg: SimConfig, light: Light | None = No
         kernels.shade(canopy, a, b, t, np.empty(t.size, np.complex128), half,
                       1.0 / column_width)
     photons = candidate_points(cfg)
+    # The simulator uses up every photon a node comes within kill distance of: candidates
+    # there would draw the shape oracle's spot to where nothing can grow any more.
+    if view.n_nodes:
+        gap = np.abs(photons[:, None] - pos[None, :view.n_nodes]).min(axis=1)
+        photons = photons[gap >= cfg.width_m(cfg.kill_distance)]
     view.canopy = canopy
     view.photons, view.photon_x = photons, np.ascontiguousarray(photons.real)
     view.photon_column = np.minimum((view.photon_x / column_width).astype(np.intp),

@@ -168,7 +168,7 @@ class Pipeline:
         c.plant_pixels = int(np.count_nonzero(seg.mask))
         clock.lap('segment')
         out.tree = tree = measure_tree(seg.mask, grid, cfg.width_m(cfg.first_branch_height),
-                                       cfg.branch_length_m, p.tree)
+                                       cfg.branch_length_m, p.tree, seg.coverage)
         c.skeleton_px, c.unattached_px = tree.skeleton_px, tree.unattached_px
         c.tips, c.tips_pruned = int(tree.tips.size), tree.tips_pruned
         clock.lap('skeleton')

@@ -86,8 +86,17 @@ class SkeletonGraph:
     unattached: int
 
 
-def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> SkeletonGraph:
+def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
+                   coverage: np.ndarray | None = None) -> SkeletonGraph:
     """The skeleton of a plant mask as paths from its stem bases.
+
+    Args:
+        mask: (rows, cols) bool plant mask on ``grid``.
+        grid: The rectified plane.
+        params: Base band, spur pruning.
+        coverage: (rows, cols) plant cover per pixel in [0, 1] (``Segmentation.coverage``):
+            skeleton pixels and stem bases are placed at its centroids, to a fraction of a
+            pixel; None: at the mask's.
 
     Raises:
         CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
@@ -99,6 +108,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     box = (slice(top, top + height_px + 4), slice(left, left + width + 4))
     rows, cols = np.nonzero(skeletonize(mask[box]))
     radius = cv2.distanceTransform(mask[box].astype(np.uint8), cv2.DIST_L2, 3)[rows, cols]
+    cover = (mask if coverage is None else coverage)[box].astype(np.float64)
+    centre_rows, centre_cols = _centres(cover, rows, cols, radius)
     rows, cols = rows + top, cols + left
     n = rows.size
     if n == 0:
@@ -109,7 +120,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     if roots.size == 0:
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
                           f'within base_band_m = {params.base_band_m} m of z = 0')
-    root_cols = _stem_centres(mask, root_cols, band_px + radius[roots])
+    root_cols = _stem_centres(mask, mask if coverage is None else coverage, root_cols,
+                              band_px + radius[roots])
     src, dst, weight = _edges(rows, cols, mask.shape)
     # A virtual source joins every base at its height: arc length counts from z = 0.
     graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
@@ -132,11 +144,40 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams) -> Skeleton
     keep = ~removed[src] & ~removed[dst]
     junction = _degree(src[keep], dst[keep], n) >= 3
     return SkeletonGraph(
-        rows=rows, cols=cols, xz=grid.xz(rows, cols), order=order, pred=pred, arc=arc,
+        rows=rows, cols=cols, xz=grid.xz(centre_rows + top, centre_cols + left), order=order,
+        pred=pred, arc=arc,
         radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
         junction=junction, removed=removed, ends=ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
         unattached=int(n - reached.sum()))
+
+
+def _centres(cover: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+             radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each skeleton pixel moved to the centroid of the plant's cover in a square about it a
+    pixel wider than the stem (float rows, columns).
+
+    Thinning keeps one of the two middle columns of a stem an even number of pixels wide (half
+    a pixel off its axis, always on the same side), and a mask's edges are whole pixels;
+    across a straight stem its cover is symmetric about its axis, so the centroid lies on it.
+    Summed-area tables (``cv2.integral``) give every pixel its own window at the same cost.
+    """
+    h, w = cover.shape
+    area = cv2.integral(cover)
+    moment_r = cv2.integral(cover * np.arange(h, dtype=np.float64)[:, None])
+    moment_c = cv2.integral(cover * np.arange(w, dtype=np.float64))
+    half = np.rint(radius).astype(np.int64) + 1
+    r0, r1 = np.maximum(rows - half, 0), np.minimum(rows + half + 1, h)
+    c0, c1 = np.maximum(cols - half, 0), np.minimum(cols + half + 1, w)
+
+    def window(table: np.ndarray) -> np.ndarray:
+        return table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+
+    count = window(area)
+    empty = count < 1e-6  # (a cover of zero around a skeleton pixel: keep the pixel)
+    count[empty] = 1.0
+    return (np.where(empty, rows, window(moment_r) / count),
+            np.where(empty, cols, window(moment_c) / count))
 
 
 def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
@@ -181,21 +222,26 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     return roots[keep], root_cols[keep], order, reached
 
 
-def _stem_centres(mask: np.ndarray, columns: np.ndarray, band_px: np.ndarray) -> np.ndarray:
-    """Each stem's column: the median centre of its mask run over the base band's rows.
+def _stem_centres(mask: np.ndarray, cover: np.ndarray, columns: np.ndarray,
+                  band_px: np.ndarray) -> np.ndarray:
+    """Each stem's column: the median over the base band's rows of the centroid of the
+    plant's cover across its mask run (the first background pixel each side included).
 
-    The mask's two edges place a stem to a fraction of a pixel where its skeleton is only
-    good to one (and hooks towards a corner of the stem's cut end)."""
+    The cover places a stem to a fraction of a pixel where its skeleton is only good to one
+    (and hooks towards a corner of the stem's cut end)."""
     out = columns.astype(float).copy()
     height, width = mask.shape
     for k, (column, band) in enumerate(zip(columns.tolist(), band_px.tolist())):
         c, centres = int(round(column)), []
-        for row in mask[max(0, height - int(band)):]:
+        for r in range(max(0, height - int(band)), height):
+            row = mask[r]
             if not row[c]:
                 continue
-            left = c - int(np.argmin(row[c::-1])) if not row[:c + 1].all() else -1
-            right = c + int(np.argmin(row[c:])) if not row[c:].all() else width
-            centres.append(0.5 * (left + right))  # between the first background pixels
+            left = c - int(np.argmin(row[c::-1])) if not row[:c + 1].all() else 0
+            right = c + int(np.argmin(row[c:])) if not row[c:].all() else width - 1
+            weight = cover[r, left:right + 1].astype(np.float64)
+            if weight.sum() > 0:
+                centres.append(float(weight @ np.arange(left, right + 1)) / weight.sum())
         if centres:
             out[k] = float(np.median(centres))
     return out
