@@ -243,6 +243,19 @@ def test_an_unseeded_episode_after_a_refused_reset_is_measured_with_its_recorded
                for r in results[STEPS + 1:])
 
 
+def test_a_shape_recording_is_measured_again_against_its_recorded_digit(tmp_path, capsys):
+    rig = rig_recording(tmp_path / 'shape.mcap', [7, None], 1, challenge='shape')
+    masks = [json.loads(c.data)['target']['mask'] for c in decoded(rig, 'chamber/config')]
+    res = SimConfig(challenge='shape').resolution
+    assert all(len(m) == res and {len(r) for r in m} == {res} and '1' in ''.join(m)
+               for m in masks)
+    out = tmp_path / 'out.mcap'
+    assert main(['resegment', str(rig), str(out)]) == 0
+    assert '4 photo(s) measured again, 4 read (recorded: 4), 0 step(s) changed' in \
+        capsys.readouterr().out
+    assert_same_messages(rig, out)
+
+
 def test_a_recorded_target_that_cannot_be_read_leaves_its_episode_unmeasured(bags, tmp_path):
     def spoil(payload):
         if payload['reset_id'] == 2:
