@@ -4,19 +4,25 @@ the photo twin and the real message classes, with growspace_sim.recording's writ
 Per reached move, with the step's stamp and in the gantry's order: ``camera/image_raw`` and
 ``plant/state`` (from a measured photo only), ``light/state``, ``camera/photo``,
 ``camera/measurement``, ``step_result`` (``info = "error: camera: <code>: <why>"`` when the photo
-was not measured); ``chamber/config`` at each reset, ``reset`` and ``light/command`` as
-received. The camera answers through camera_node's own capture service (``FakeTransport``).
+was not measured); ``chamber/config`` at start-up (``reset_id`` 0) and at each reset it takes,
+with the episode's ``target`` as the camera is sent it; ``reset`` and ``light/command`` as
+received. A reset the gantry refuses after laying it out (``Refused``: its light out of the
+machine's travel) is answered with an error step_result and no ``chamber/config``, and has drawn
+from the random stream, as gantry_node's ``on_reset`` does. The camera answers through
+camera_node's own capture service (``FakeTransport``), asked with the gantry's own payload.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+import json
 from pathlib import Path
 
 import numpy as np
 
 from growspace_camera import messages as wire
+from growspace_gantry.photo import capture_request as gantry_capture
 from growspace_camera.main import build
-from growspace_camera.measure import Target
 from growspace_camera.settings import CameraParams
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
@@ -25,12 +31,14 @@ from growspace_sim.node.params import as_values
 from growspace_sim.recording import McapRecorder
 from growspace_sim.ros import convert, types
 from growspace_sim.ros.interface import (
-    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS)
+    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS,
+    target_payload)
 from growspace_sim.ros.qos import LATCHED
 from growspace_sim.simulation import Simulation
 
 NS = '/growspace'
 T0 = 1_700_000_000_000_000_000
+STARTUP_SEED = 0  # the gantry's seed parameter: its start-up layout (no move, no photo)
 TOPICS = {  # relative name -> (type, QoS), as gantry_node registers them
     'reset': (types.RESET_REQUEST, COMMAND_QOS),
     'light/command': (types.LIGHT_COMMAND, COMMAND_QOS),
@@ -44,17 +52,34 @@ TOPICS = {  # relative name -> (type, QoS), as gantry_node registers them
 }
 
 
-def rig_recording(path: Path, episodes: list[int | None], steps: int, *,
+@dataclass(frozen=True)
+class Refused:
+    """A reset the gantry lays out and then refuses (seed None: unseeded)."""
+
+    seed: int | None = None
+
+
+def payload(world: Simulation, seed: int | None, reset_id: int) -> str:
+    """The gantry's ``chamber/config`` payload (``GantryNode._config_payload``)."""
+    c = world.chamber
+    return config_json(world.cfg, seed, mode='lockstep', rate_hz=0.0, frame_id='chamber',
+                       reset_id=reset_id, episode=world.episode, digit=world.digit,
+                       source='gantry', target=target_payload(c.target, c.target_mask))
+
+
+def rig_recording(path: Path, episodes: list[int | None | Refused], steps: int, *,
                   challenge: str = 'control', chunk_size: int = 1024 * 1024,
-                  **camera: object) -> Path:
+                  target: bool = True, **camera: object) -> Path:
     """Record oracle episodes on a twin rig (seed None: an unseeded reset).
 
     Args:
         path: The .mcap to write.
-        episodes: One seed per episode (the first must be an int).
+        episodes: One seed per reset (``Refused``: a reset the gantry refuses).
         steps: Steps per episode after its reset.
         challenge: The challenge.
         chunk_size: The recorder's chunk size.
+        target: False: ``chamber/config`` without its ``target``, as gantry_node wrote it
+            before it recorded the target.
         camera: camera_node parameters (e.g. ``min_greenness=0.9`` for a bad threshold).
     """
     transport = FakeTransport('growspace_camera', NS)
@@ -68,20 +93,36 @@ def rig_recording(path: Path, episodes: list[int | None], steps: int, *,
     with McapRecorder(path, chunk_size=chunk_size, flush_period_s=3600.0) as rec:
         channels = {rel: rec.add_channel(f'{NS}/{rel}', t, q) for rel, (t, q) in TOPICS.items()}
         rec.add_metadata(METADATA_NAME, growspace_metadata(
-            cfg, episodes[0], namespace=NS, frame_id='chamber', rate_hz=0.0, lockstep=True))
+            cfg, STARTUP_SEED, namespace=NS, frame_id='chamber', rate_hz=0.0, lockstep=True))
 
         def write(rel: str, msg: object, t: int) -> None:  # a step's outputs: one callback
             rec.write(channels[rel], types.serialize(msg, TOPICS[rel][0]), t, t)
 
+        def config(seed: int | None, reset_id: int, t: int) -> None:
+            text = payload(world, seed, reset_id)
+            if not target:
+                text = json.dumps({k: v for k, v in json.loads(text).items() if k != 'target'},
+                                  sort_keys=True, separators=(',', ':'))
+            write('chamber/config', types.new(types.STRING, data=text), t)
+
+        world.reset(seed=STARTUP_SEED)
+        config(STARTUP_SEED, 0, next(clock))
+        reset_id = 0
         for reset_id, seed in enumerate(episodes, start=1):
+            refused = isinstance(seed, Refused)
+            seed = seed.seed if refused else seed
             stamp = next(clock)
             write('reset', types.new(types.RESET_REQUEST, header=convert.header(stamp, ''),
                                      reset_id=reset_id, has_seed=seed is not None,
                                      seed=seed or 0), stamp)
-            world.reset(seed=seed)
-            write('chamber/config', types.new(types.STRING, data=config_json(
-                cfg, seed, mode='lockstep', rate_hz=0.0, frame_id='chamber', reset_id=reset_id,
-                episode=world.episode, digit=world.digit, source='gantry')), stamp)
+            world.reset(seed=seed)  # the gantry's light model resets before it can refuse
+            if refused:
+                write('step_result', convert.step_result_msg(
+                    StepOutcome(0.0, np.zeros(cfg.plant_count), False, False, 0), step_id=0,
+                    reset_id=reset_id, step=steps, stamp_ns=stamp, frame_id='chamber',
+                    info='error: the target x = 9 m is outside the travel'), stamp)
+                continue
+            config(seed, reset_id, stamp)
             for step in range(steps + 1):
                 step_id = step
                 if step:
@@ -94,10 +135,9 @@ def rig_recording(path: Path, episodes: list[int | None], steps: int, *,
                 stamp = next(clock)
                 light = convert.light_msg(world.chamber.light, step_id, stamp, 'chamber')
                 c = world.chamber
-                request = wire.capture_request(
-                    config_json(cfg, world.seed), c.light.copy(), stamp, step_id, c.steps,
-                    Target(point=c.target) if cfg.task.digits is None else
-                    Target(mask=c.target_mask))
+                request = gantry_capture(stamp, step_id, c.steps, payload(
+                    world, world.seed, reset_id), light, cfg, c.target, c.target_mask,
+                    'chamber')
                 reply = capture(request)
                 m = reply.measurement
                 if m.ok:

@@ -17,16 +17,18 @@ import cv2
 import numpy as np
 import pytest
 
-from camera_bags import rig_recording
+from camera_bags import Refused, rig_recording
 from growspace_camera.cli import main
 from growspace_camera.photo_export import CAPTION_PX
 from growspace_camera.recorded import RecordedSteps
 from growspace_camera.resegment import RESEGMENT_METADATA
 from growspace_camera.settings import PIPELINE_FIELDS
+from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import McapRecorder
 from growspace_sim.recording.scan import RECOVERY_METADATA
 from growspace_sim.replay.bag import Bag
 from growspace_sim.ros import types
+from growspace_sim.simulation import Simulation
 from test_bag_damage import _channel_id, chunks_of, damaged_copy, flip_in_data, messages_in
 from test_readme import documented, ROOT
 
@@ -177,7 +179,7 @@ def test_an_episode_whose_reset_is_not_in_the_file_is_not_measured(bags, tmp_pat
         channels = {t: rec.add_channel(t, i.typename, i.qos) for t, i in bag.topics.items()}
         rec.add_metadata('growspace', metadata['growspace'])
         for m in messages:
-            if m is not configs[1]:
+            if m is not configs[-1]:  # the second reset's
                 rec.write(channels[m.topic], m.data, m.log_time, m.publish_time)
     out = tmp_path / 'out.mcap'
     assert main(['resegment', str(cut), str(out)]) == 0
@@ -186,6 +188,87 @@ def test_an_episode_whose_reset_is_not_in_the_file_is_not_measured(bags, tmp_pat
     assert all(r.info.startswith('error: camera: bad_input: ') and 'reset_id 2' in r.info
                and r.reward == 0.0 for r in results[STEPS + 1:])
     assert len(decoded(out, 'camera/image_raw')) == STEPS + 1
+
+
+def rewritten_configs(src, dst, change):
+    """A copy of ``src`` with each chamber/config payload passed through ``change``."""
+    messages, metadata = read(src)
+    with Bag(src) as bag, McapRecorder(dst) as rec:
+        channels = {t: rec.add_channel(t, i.typename, i.qos) for t, i in bag.topics.items()}
+        rec.add_metadata('growspace', metadata['growspace'])
+        for m in messages:
+            data = m.data
+            if m.topic == '/growspace/chamber/config':
+                payload = change(json.loads(m.decode().data))
+                data = types.serialize(types.new(types.STRING, data=json.dumps(payload)),
+                                       types.STRING)
+            rec.write(channels[m.topic], data, m.log_time, m.publish_time)
+    return dst
+
+
+def test_an_unseeded_episode_after_a_refused_reset_is_measured_with_its_recorded_target(
+        tmp_path, capsys):
+    # The gantry laid out reset 2 (drawing from the random stream) and refused it: no
+    # chamber/config for it. Reset 3 continues the stream from where the refusal left it.
+    episodes = [7, Refused(None), None]
+    rig = rig_recording(tmp_path / 'rig.mcap', episodes, STEPS)
+    assert [m.reset_id for m in decoded(rig, 'step_result') if m.info] == [2]
+    photos = 2 * (STEPS + 1)
+    out = tmp_path / 'out.mcap'
+    assert main(['resegment', str(rig), str(out)]) == 0
+    assert f'{photos} photo(s) measured again, {photos} read (recorded: {photos}), 0 step(s) ' \
+        f'changed' in capsys.readouterr().out
+    assert_same_messages(rig, out)  # the camera's live numbers, from the recorded target
+    with Bag(rig) as bag:
+        recorded = [p for step in RecordedSteps(bag) for p in step.photos]
+    sim = Simulation(SimConfig())
+    for seed in (7, None, None):
+        sim.reset(seed=seed)
+    assert {p.target.point for p in recorded[STEPS + 1:]} == {sim.chamber.target}
+    sim.reset(seed=7)
+    sim.reset(seed=None)  # the stream without the refused reset: another target
+    assert sim.chamber.target != recorded[-1].target.point
+
+    # The same run as recorded before the gantry recorded its target: the stream is laid out
+    # again, cannot know of the refusal, and says so instead of measuring with a wrong target.
+    old = rig_recording(tmp_path / 'old.mcap', episodes, STEPS, target=False)
+    assert 'target' not in json.loads(decoded(old, 'chamber/config')[-1].data)
+    legacy = tmp_path / 'legacy.mcap'
+    assert main(['resegment', str(old), str(legacy)]) == 0
+    results = [r for r in decoded(legacy, 'step_result') if r.reset_id != 2]
+    assert all(not r.info for r in results[:STEPS + 1])
+    assert all(r.info.startswith('error: camera: bad_input: episode 2: its target was not laid '
+                                 'out as the gantry did (episode 4 recorded, 3 here')
+               and 'predates the target' in r.info and r.reward == 0.0
+               for r in results[STEPS + 1:])
+
+
+def test_a_shape_recording_is_measured_again_against_its_recorded_digit(tmp_path, capsys):
+    rig = rig_recording(tmp_path / 'shape.mcap', [7, None], 1, challenge='shape')
+    masks = [json.loads(c.data)['target']['mask'] for c in decoded(rig, 'chamber/config')]
+    res = SimConfig(challenge='shape').resolution
+    assert all(len(m) == res and {len(r) for r in m} == {res} and '1' in ''.join(m)
+               for m in masks)
+    out = tmp_path / 'out.mcap'
+    assert main(['resegment', str(rig), str(out)]) == 0
+    assert '4 photo(s) measured again, 4 read (recorded: 4), 0 step(s) changed' in \
+        capsys.readouterr().out
+    assert_same_messages(rig, out)
+
+
+def test_a_recorded_target_that_cannot_be_read_leaves_its_episode_unmeasured(bags, tmp_path):
+    def spoil(payload):
+        if payload['reset_id'] == 2:
+            payload['target'] = {'x': 'far', 'z': 0.5}
+        return payload
+    bad = rewritten_configs(bags[0], tmp_path / 'spoilt.mcap', spoil)
+    out = tmp_path / 'out.mcap'
+    assert main(['resegment', str(bad), str(out)]) == 0
+    results = decoded(out, 'step_result')
+    assert all(not r.info for r in results[:STEPS + 1])
+    assert all(r.info.startswith('error: camera: bad_input: episode 2: its chamber/config cannot '
+                                 'be read: target must be {"x": <m>, "z": <m>} (finite) or ')
+               and '"x": "far"' in r.info for r in results[STEPS + 1:])
 
 
 def test_a_damaged_recording_is_read_around_and_a_cut_one_sent_to_recover(tmp_path, capsys):
@@ -219,10 +302,16 @@ def test_a_damaged_recording_is_read_around_and_a_cut_one_sent_to_recover(tmp_pa
 def test_the_steps_of_a_recording_read_back_with_their_context(bags):
     with Bag(bags[0]) as bag:
         photos = [p for step in RecordedSteps(bag) for p in step.photos]
+    # Episode 0 is the gantry's start-up layout (no move, so no photo).
     assert [(p.episode, p.step) for p in photos] == \
-        [(e, s) for e in range(len(EPISODES)) for s in range(STEPS + 1)]
+        [(e, s) for e in range(1, len(EPISODES) + 1) for s in range(STEPS + 1)]
     assert all(p.light is not None and p.result is not None and not p.unknown for p in photos)
-    # The unseeded episode's target is the continued stream's, not the first episode's.
+    # Each photo's target is the one the camera was sent: the unseeded episode's is the
+    # continued stream's, not the first episode's.
+    sim = Simulation(SimConfig())
+    for episode, seed in enumerate(EPISODES, start=1):
+        sim.reset(seed=seed)
+        assert {p.target.point for p in photos if p.episode == episode} == {sim.chamber.target}
     assert photos[0].target.point != photos[-1].target.point
 
 
@@ -234,7 +323,7 @@ def test_export_draws_what_the_camera_saw_on_every_photo(bags, tmp_path, capsys)
         capsys.readouterr().out
     files = sorted(seen.iterdir())
     assert [f.name for f in files] == [f'{i:05d}_ep{e:03d}_step{s:04d}.png' for i, (e, s) in
-                                       enumerate((e, s) for e in range(len(EPISODES))
+                                       enumerate((e, s) for e in range(1, len(EPISODES) + 1)
                                                  for s in range(STEPS + 1))]
     photos = decoded(good, 'camera/photo')
     for path, photo in zip(files, photos):

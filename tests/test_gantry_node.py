@@ -7,6 +7,7 @@ safety is concerned: a refused command is never written, the lamp ends off after
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from typing import Any
@@ -116,6 +117,10 @@ def test_lockstep_episode_follows_the_simulator_light(rig: Rig) -> None:
     assert rig.run_until(lambda: rig.results() and rig.results()[-1].reset_id == 1)
     sim = Simulation(SimConfig(challenge='control', setting='hard'))
     sim.reset(seed=11)
+    # The episode's target is recorded with its config, as the camera would be sent it.
+    config = json.loads(rig.transport.messages('chamber/config')[-1].data)
+    assert (config['reset_id'], config['source']) == (1, 'gantry')
+    assert config['target'] == {'x': sim.chamber.target.real, 'z': sim.chamber.target.imag}
     rng = np.random.default_rng(0)
     for step_id in range(1, 13):
         action = int(rng.integers(5))

@@ -9,6 +9,7 @@ transport.
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -258,6 +259,11 @@ def test_each_step_is_photographed_under_the_photo_light_and_answered_with_the_m
         assert (result.info, result.reward, list(result.plant_rewards)) == ('', 0.5, [0.5])
         request, lit, state = rig.asked[-1]
         assert lit and state == 'Idle' and request.step_id == step_id
+        # The episode's target as the camera is sent it is in the recorded chamber/config.
+        config = json.loads(rig.transport.messages('chamber/config')[-1].data)
+        assert config['reset_id'] == 1 and request.has_point_target
+        assert config['target'] == {'x': request.target_x, 'z': request.target_z}
+        assert json.loads(request.config)['target'] == config['target']
         assert convert.to_ns(request.header.stamp) == convert.to_ns(result.header.stamp)
         topics = [t.rsplit('/', 1)[-1] for t in rig.transport.sequence[start:]
                   if not t.endswith('gantry/status')]
@@ -359,8 +365,10 @@ def test_a_photo_in_progress_is_not_silence_for_the_watchdog(tmp_path) -> None:
 
 @pytest.mark.parametrize('challenge', ['control', 'shape'])
 def test_the_capture_request_carries_the_episodes_target(challenge) -> None:
-    """A point for the point challenges, the digit's mask for shape (what the camera scores)."""
+    """A point for the point challenges, the digit's mask for shape (what the camera scores),
+    and the chamber/config's ``target`` entry reads back as exactly that."""
     from growspace_gantry.photo import capture_request
+    from growspace_sim.ros.interface import target_from_payload, target_payload
 
     sim = Simulation(SimConfig(challenge=challenge))
     sim.reset(seed=3)
@@ -372,14 +380,19 @@ def test_the_capture_request_carries_the_episodes_target(challenge) -> None:
                                 f'{photo.CAPTURE}_Request')
     assert (request.step_id, request.step, convert.to_ns(request.header.stamp)) == (4, 2, STAMP)
     assert request.light.x == c.light.x
+    point, mask = target_from_payload(json.loads(json.dumps(target_payload(c.target,
+                                                                           c.target_mask))))
     if challenge == 'shape':
+        assert point is None and np.array_equal(mask.reshape(-1).astype(np.uint8),
+                                                request.target_mask)
         assert not request.has_point_target
         assert np.array_equal(np.asarray(request.target_mask).reshape(c.target_mask.shape),
                               np.asarray(c.target_mask, np.uint8))
         assert request.target_mask.size == cfg.resolution ** 2 and request.target_mask.any()
     else:
         assert request.has_point_target and request.target_mask.size == 0
-        assert complex(request.target_x, request.target_z) == c.target
+        assert complex(request.target_x, request.target_z) == c.target == point
+        assert mask is None
 
 
 # ------------------------------------------------ the emulator's flood output, as GRBL documents

@@ -8,6 +8,7 @@ got. Then what a step is answered when the camera refuses a photo or is not runn
 
 from __future__ import annotations
 
+import json
 import signal
 import time
 
@@ -16,7 +17,9 @@ import numpy as np
 import pytest
 
 from grbl_emulator import GrblEmulator
-from growspace_camera.settings import load_layout
+from growspace_camera import recorded as recorded_steps
+from growspace_camera.resegment import resegment
+from growspace_camera.settings import CameraParams, load_layout
 from growspace_camera.twin import PhotoTwin
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_gym_bridge.link import ChamberLink
@@ -80,7 +83,8 @@ def recorded(bag) -> list[tuple[str, object]]:
                 for m in b.messages()]
 
 
-def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, tmp_path):
+def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, tmp_path,
+                                                                        monkeypatch):
     bag = tmp_path / 'rig.mcap'
     camera = start_camera()
     gantry = start_gantry(grbl, bag, '-p', 'capture_timeout_s:=30.0')  # a loaded CI machine
@@ -134,6 +138,19 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
     # The photo light: on (M8) for each of the 4 photos, off (M9) after each, off at the end.
     assert grbl.lines.count('M8') == 4 and not grbl.coolant
     assert grbl.coolant_history[-8:] == [True, False] * 4
+
+    # Re-segmented with the settings it ran with (camera_node's defaults), the recording gives
+    # the camera's numbers again, each episode's target read from the gantry's chamber/config
+    # (never laid out again: that path is for recordings made before it held the target).
+    configs = [json.loads(msg.data) for topic, msg in messages if topic == 'chamber/config']
+    assert len(configs) == 2 and configs[0]['reset_id'] == 0  # start-up, then the agent's
+    assert all('target' in c for c in configs)
+
+    def no_layout(*args):
+        raise AssertionError('laid out again')
+    monkeypatch.setattr(recorded_steps._Episodes, '_lay_out', no_layout)
+    report = resegment(bag, tmp_path / 'again.mcap', CameraParams())
+    assert (report.photos, report.measured, report.was_measured, report.changed) == (4, 4, 4, 0)
 
 
 def test_a_refused_photo_and_a_missing_camera_answer_the_step_with_an_error(grbl, tmp_path):

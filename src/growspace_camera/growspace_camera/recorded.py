@@ -7,12 +7,14 @@ walks such a file in order and hands out the messages between two step_results (
 each photo in it with the step's context (``RecordedPhoto``): the reached light (the
 ``light/state`` of its stamp), the episode's configuration and target, and the step.
 
-The target is not a message: the gantry lays it out from the episode's ``chamber/config``
-(challenge and seed) as the simulator does, so it is laid out again here the same way, one
-reset after the other (an unseeded reset continues the previous one's random stream). The
-payload's ``reset_id``, ``episode`` and ``digit`` check that the layout followed the gantry's;
-where it cannot (a lost or unreadable reset), the photos of that episode say why, and are not
-measured.
+The target is the one the gantry sent the camera: its ``chamber/config`` payload records it
+(``target``, ``growspace_sim.ros.interface.target_payload``), so it is read, never laid out
+again. Recordings made before the gantry recorded its target have none: there, and only there,
+the target is laid out again from each payload's challenge and seed as the simulator does, one
+reset after the other (an unseeded reset continues the previous one's random stream), and the
+payload's ``episode`` and ``digit`` check that the layout followed the gantry's. Where it cannot
+(a reset the gantry laid out and refused, a lost reset), the photos of that episode say why,
+and are not measured. Either way the step_result's ``reset_id`` must be the payload's.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.replay.bag import Bag, BagMessage, ReplayError
 from growspace_sim.ros import convert
+from growspace_sim.ros.interface import target_from_payload
 from growspace_sim.simulation import Simulation
 
 PHOTO = 'camera/photo'
@@ -200,7 +203,8 @@ class RecordedSteps:
 
 
 class _Episodes:
-    """The episodes' configurations and targets, laid out again reset after reset."""
+    """The episodes' configurations and targets: recorded, or (older recordings) laid out again
+    reset after reset."""
 
     def __init__(self, digit_source: str) -> None:
         self.digit_source = digit_source
@@ -220,22 +224,37 @@ class _Episodes:
         self.index += 1
         self.cfg = self.target = self.reset_id = None
         try:
-            self.unknown = self._lay_out(text)
-        except (ValueError, KeyError, TypeError, FileNotFoundError) as e:
-            self.unknown = f'its chamber/config cannot be laid out again: {e}'
+            payload = json.loads(text)
+            cfg = SimConfig.from_dict(payload['config'])
+            self.unknown = self._recorded(payload, cfg) if 'target' in payload else \
+                self._lay_out(payload, cfg)
+        except (ValueError, KeyError, TypeError, FileNotFoundError, CameraError) as e:
+            self.unknown = f'its chamber/config cannot be read: {e}'
+        if not self.unknown:
+            reset_id = payload.get('reset_id')
+            self.reset_id = reset_id if isinstance(reset_id, int) else None
         if self.unknown:
             self.followed = False
             self.unknown = f'episode {self.index}: {self.unknown}'
 
-    def _lay_out(self, text: str) -> str:
-        payload = json.loads(text)
-        cfg = SimConfig.from_dict(payload['config'])
+    def _recorded(self, payload: dict, cfg: SimConfig) -> str:
+        """The target the gantry recorded (and sent the camera)."""
+        point, mask = target_from_payload(payload['target'])
+        target = Target(point=point, mask=mask)
+        target.check(cfg)
+        self.cfg, self.target = cfg, target
+        self.followed = False  # no stream followed: a later payload without a target can't be
+        return ''
+
+    def _lay_out(self, payload: dict, cfg: SimConfig) -> str:
+        """A recording made before the gantry recorded its target: lay it out again."""
         seed = payload.get('seed')
         if not isinstance(seed, int) or isinstance(seed, bool):
             seed = None
         if seed is None and not self.followed:
             return ('its reset continues the random stream of an episode that could not be '
-                    'followed (no seed recorded), so its target is unknown')
+                    'followed (no seed recorded), so its target is unknown (this recording '
+                    "predates the target in the gantry's chamber/config)")
         sim = self.sim
         sim = Simulation(cfg, self.digit_source) if sim is None else \
             sim.with_config(cfg) if cfg != sim.cfg else sim
@@ -244,13 +263,13 @@ class _Episodes:
         for key, mine in (('episode', sim.episode), ('digit', sim.digit)):
             if key in payload and payload[key] != mine:
                 return (f'its target was not laid out as the gantry did ({key} {payload[key]!r} '
-                        f'recorded, {mine!r} here: a reset the recording does not hold)')
+                        f'recorded, {mine!r} here: a reset the recording does not hold, or one '
+                        f'the gantry laid out and refused; this recording predates the target '
+                        f"in the gantry's chamber/config)")
         chamber = sim.chamber
         self.cfg = cfg
         self.target = Target(point=chamber.target) if cfg.task.digits is None else \
             Target(mask=np.asarray(chamber.target_mask, bool))
-        reset_id = payload.get('reset_id')
-        self.reset_id = reset_id if isinstance(reset_id, int) else None
         return ''
 
 

@@ -10,7 +10,9 @@ chamber namespace:
 - in ``gantry/estop`` (std_msgs/Empty topic and std_srvs/Trigger service): feed hold, lamp off,
   soft reset
 - in ``gantry/unlock``, ``gantry/home`` (std_srvs/Trigger): a person's ``$X`` / ``$H``
-- out ``chamber/config`` (std_msgs/String, latched JSON)
+- out ``chamber/config`` (std_msgs/String, latched JSON): the simulator's keys, and
+  ``target``, the episode's target exactly as the camera is sent it (``target_payload``), so a
+  recording holds it and never needs the layout run again
 - out ``light/state`` (growspace_msgs/LightCommand): the light the controller REPORTS reaching
 - out ``step_result`` (growspace_msgs/StepResult): once per reset and lockstep command, when the
   move is done
@@ -56,7 +58,8 @@ from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import (
-    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS, Topic)
+    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS,
+    target_payload, Topic)
 from growspace_sim.simulation import Simulation
 
 EMPTY = 'std_msgs/msg/Empty'
@@ -340,10 +343,11 @@ class GantryNode:
             frame_id=self.params.frame_id, info=info))
 
     def _config_payload(self, seed: int | None) -> str:
-        p = self.params
+        p, chamber = self.params, self.sim.chamber
         return config_json(self.cfg, seed, mode=p.mode, rate_hz=0.0, frame_id=p.frame_id,
                            reset_id=self.reset_id, episode=self.sim.episode,
-                           digit=self.sim.digit, source='gantry')
+                           digit=self.sim.digit, source='gantry',
+                           target=target_payload(chamber.target, chamber.target_mask))
 
     @staticmethod
     def _trigger(error: str, done: str = 'done') -> Any:

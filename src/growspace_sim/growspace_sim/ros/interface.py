@@ -26,7 +26,10 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from typing import Any, NamedTuple
+
+import numpy as np
 
 from growspace_sim import __version__
 
@@ -90,6 +93,44 @@ def config_json(cfg: SimConfig, seed: int | None, **extra: Any) -> str:
     payload = {'config': config_dict(cfg), 'seed': seed, 'version': __version__,
                'format': FORMAT, **extra}
     return json.dumps(payload, sort_keys=True, separators=(',', ':'))
+
+
+def target_payload(point: complex | None, mask: np.ndarray | None) -> dict[str, Any]:
+    """The ``target`` entry of a rig's ``chamber/config`` payload: the episode's target exactly
+    as the gantry sends it to the camera (``growspace_msgs/srv/Capture``).
+
+    Args:
+        point: The point target (x + iz) [m] (``has_point_target``, ``target_x``, ``target_z``).
+        mask: The (res, res) shape target (``target_mask``), or None for a point target.
+
+    Returns:
+        ``{"mask": [row, ...]}`` (one string of ``0``/``1`` per image row, row 0 = chamber top)
+        for a shape target, else ``{"x": .., "z": ..}`` (floats round-trip exactly in JSON).
+    """
+    if mask is not None:
+        return {'mask': [''.join('1' if v else '0' for v in row)
+                         for row in np.asarray(mask, bool)]}
+    return {'x': float(point.real), 'z': float(point.imag)}
+
+
+def target_from_payload(value: Any) -> tuple[complex | None, np.ndarray | None]:
+    """The point or the shape mask of a ``target`` entry (``target_payload``).
+
+    Raises:
+        ValueError: naming what is wrong with the entry.
+    """
+    if isinstance(value, dict) and set(value) == {'x', 'z'}:
+        x, z = value['x'], value['z']
+        if all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+               for v in (x, z)):
+            return complex(x, z), None
+    elif isinstance(value, dict) and set(value) == {'mask'} and isinstance(value['mask'], list):
+        rows = value['mask']
+        if rows and all(isinstance(r, str) and len(r) == len(rows) and set(r) <= {'0', '1'}
+                        for r in rows):
+            return None, np.array([[c == '1' for c in row] for row in rows], bool)
+    raise ValueError(f'target must be {{"x": <m>, "z": <m>}} (finite) or {{"mask": [<n> rows '
+                     f'of <n> "0"/"1">]}}, got {json.dumps(value)[:120]}')
 
 
 def growspace_metadata(cfg: SimConfig, seed: int | None, *, namespace: str, frame_id: str,
