@@ -6,10 +6,12 @@ Per reached move, with the step's stamp and in the gantry's order: ``camera/imag
 ``camera/measurement``, ``step_result`` (``info = "error: camera: <code>: <why>"`` when the photo
 was not measured); ``chamber/config`` at start-up (``reset_id`` 0) and at each reset it takes,
 with the episode's ``target`` as the camera is sent it; ``reset`` and ``light/command`` as
-received. A reset the gantry refuses after laying it out (``Refused``: its light out of the
-machine's travel) is answered with an error step_result and no ``chamber/config``, and has drawn
-from the random stream, as gantry_node's ``on_reset`` does. The camera answers through
-camera_node's own capture service (``FakeTransport``), asked with the gantry's own payload.
+received. A reset the gantry refuses (``Refused``: its light out of the machine's travel) is
+answered with an error step_result and no ``chamber/config``, and changes nothing, as
+gantry_node's ``on_reset`` does; written as before the gantry recorded its target
+(``target=False``), it has drawn from the random stream, as the gantry then did. The camera
+answers through camera_node's own capture service (``FakeTransport``), asked with the
+gantry's own payload.
 """
 
 from __future__ import annotations
@@ -78,8 +80,8 @@ def rig_recording(path: Path, episodes: list[int | None | Refused], steps: int, 
         steps: Steps per episode after its reset.
         challenge: The challenge.
         chunk_size: The recorder's chunk size.
-        target: False: ``chamber/config`` without its ``target``, as gantry_node wrote it
-            before it recorded the target.
+        target: False: as gantry_node wrote before it recorded the target (``chamber/config``
+            without it, and a refused reset that had drawn from the random stream).
         camera: camera_node parameters (e.g. ``min_greenness=0.9`` for a bad threshold).
     """
     transport = FakeTransport('growspace_camera', NS)
@@ -115,7 +117,8 @@ def rig_recording(path: Path, episodes: list[int | None | Refused], steps: int, 
             write('reset', types.new(types.RESET_REQUEST, header=convert.header(stamp, ''),
                                      reset_id=reset_id, has_seed=seed is not None,
                                      seed=seed or 0), stamp)
-            world.reset(seed=seed)  # the gantry's light model resets before it can refuse
+            if not refused or not target:  # the gantry of then laid it out before refusing
+                world.reset(seed=seed)
             if refused:
                 write('step_result', convert.step_result_msg(
                     StepOutcome(0.0, np.zeros(cfg.plant_count), False, False, 0), step_id=0,

@@ -284,3 +284,38 @@ def test_shutdown_turns_the_lamp_off_and_leaves_the_machine_idle(rig: Rig) -> No
     assert rig.grbl.spindle[0] == 'M5'
     assert rig.grbl.state in ('Idle', 'Alarm')
     assert rig.results()[-1].step_id == 1 and 'shutting down' in rig.results()[-1].info
+
+
+def test_a_refused_reset_changes_nothing(tmp_path) -> None:
+    """A reset whose light is out of the travel is refused and leaves the light model as it
+    was: the next unseeded reset is the simulator's after the accepted resets only."""
+    rig = Rig(tmp_path, cal=load_cal(x={'axis': 'X', 'mm_per_m': 1000.0, 'offset_mm': -845.0,
+                                        'direction': 1, 'min_mm': -600.0, 'max_mm': -5.0}))
+    try:
+        rig.ready()
+
+        def configs() -> list[Any]:
+            return rig.transport.messages('chamber/config')
+
+        def reset(reset_id: int, seed: int | None) -> Any:
+            before = len(rig.results())
+            rig.transport.inject('reset', types.new(
+                types.RESET_REQUEST, reset_id=reset_id, has_seed=seed is not None,
+                seed=seed or 0))
+            assert rig.run_until(lambda: len(rig.results()) > before, timeout=10.0)
+            return rig.results()[-1]
+
+        assert reset(1, 1).info == ''  # light at x = 0.72 m: inside [0.245, 0.84]
+        published = len(configs())
+        refused = reset(2, 10)  # light at x = 0.22 m
+        assert 'outside its travel' in refused.info and len(configs()) == published
+        assert reset(3, None).info == ''
+        sim = Simulation(SimConfig())
+        sim.reset(seed=1)
+        sim.reset(seed=None)
+        config = json.loads(configs()[-1].data)
+        assert (config['reset_id'], config['episode']) == (3, sim.episode + 1)  # + start-up
+        assert config['target'] == {'x': sim.chamber.target.real, 'z': sim.chamber.target.imag}
+        assert rig.grbl.mpos[0] == pytest.approx(-845.0 + 1000.0 * sim.chamber.light.x, abs=0.05)
+    finally:
+        rig.close()

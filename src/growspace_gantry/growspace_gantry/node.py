@@ -196,7 +196,7 @@ class GantryNode:
             seed, challenge, setting = convert.reset_args(msg)
             changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
             cfg = self.cfg.replace(**changes) if changes else self.cfg
-            sim = self.sim.with_config(cfg) if cfg != self.cfg else self.sim
+            sim = self.sim.fork(cfg)  # kept only if accepted: a refused reset changes nothing
             sim.reset(seed=seed)
             target = self.cal.to_machine(sim.chamber.light)
         except (CommandError, TargetError, ValueError) as e:

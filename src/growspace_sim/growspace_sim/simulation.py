@@ -7,6 +7,7 @@ the same actions give the same images, rewards and plants whichever way they arr
 from __future__ import annotations
 
 from collections.abc import Sequence
+import copy
 
 import numpy as np
 
@@ -59,6 +60,16 @@ class Simulation:
         """
         sim = Simulation(cfg, self.digit_source)
         sim._rng, sim._seed, sim._episode = self._rng, self._seed, self._episode
+        return sim
+
+    def fork(self, cfg: SimConfig | None = None) -> Simulation:
+        """Like ``with_config``, on a copy of the random stream: a reset of the fork lays out
+        what this simulation's next reset would, and leaves this one as it was (a reset that
+        may still be refused is tried on a fork, and kept only once accepted)."""
+        sim = self.with_config(cfg or self.cfg)
+        sim._rng = copy.deepcopy(self._rng)
+        if cfg is None:
+            sim.target_digits = self.target_digits
         return sim
 
     def set_target_digits(self, digits: Sequence[int]) -> None:
