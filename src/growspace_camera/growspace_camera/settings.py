@@ -151,13 +151,7 @@ def read_overrides(path: str) -> dict[str, Any]:
     Raises:
         ParamError: naming the file for an unreadable file or a shape it does not have.
     """
-    try:
-        with open(path, encoding='utf-8') as f:
-            data = yaml.safe_load(f)
-    except OSError as e:
-        raise ParamError(f'--params {path!r} cannot be read: {e.strerror or e}') from None
-    except yaml.YAMLError as e:
-        raise ParamError(f'--params {path!r} is not YAML: {e}') from None
+    data = _read_yaml(path, f'--params {path!r}')
     if isinstance(data, dict) and len(data) == 1:
         (inner,) = data.values()
         if isinstance(inner, dict) and isinstance(inner.get('ros__parameters'), dict):
@@ -182,14 +176,19 @@ def load_layout(path: str = '') -> MarkerLayout:
             value.
     """
     path = path or default_markers()
+    return layout_from_dict(_read_yaml(path, f'markers = {path!r}'), path)
+
+
+def _read_yaml(path: str, what: str) -> Any:
+    """A YAML file's data, or a ParamError that starts with ``what`` (the setting that named
+    the file)."""
     try:
         with open(path, encoding='utf-8') as f:
-            data = yaml.safe_load(f)
+            return yaml.safe_load(f)
     except OSError as e:
-        raise ParamError(f'markers = {path!r} cannot be read: {e.strerror or e}') from None
+        raise ParamError(f'{what} cannot be read: {e.strerror or e}') from None
     except yaml.YAMLError as e:
-        raise ParamError(f'markers = {path!r} is not YAML: {e}') from None
-    return layout_from_dict(data, path)
+        raise ParamError(f'{what} is not YAML: {e}') from None
 
 
 def layout_from_dict(data: Any, where: str = 'markers') -> MarkerLayout:
