@@ -13,6 +13,7 @@ import csv
 import importlib.util
 import json
 import os
+import pickle
 import signal
 import socket
 import subprocess
@@ -148,9 +149,12 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     newest = max(finished, key=lambda k: finished[k][0]['started'])
     on_record = {k: v for k, v in finished.items() if k != newest}
     state = max((out / 'tune').glob('experiment_state-*.json'))
+    search = max((out / 'tune').glob('basic-variant-state-*.json'), default=None)
     try:
         json.loads(state.read_text())
-    except ValueError:
+        if search is not None:
+            pickle.loads(search.read_bytes())  # the search algorithm's state: cut short too
+    except (ValueError, EOFError, pickle.UnpicklingError):
         on_record = {}
 
     assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
@@ -168,15 +172,16 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     assert {t['status'] for t in _read_csv(out / 'trials.csv')} == {'ok'}
 
 
+@pytest.mark.parametrize('cut', ['experiment_state', 'basic-variant-state'])
 def test_a_tune_state_cut_short_is_set_aside_and_every_trial_runs_again(
-        tmp_path, local_ray, capsys):
+        tmp_path, local_ray, capsys, cut):
     spec = _write_spec(tmp_path / 'cut.yaml', [
         {'agents': ['random'], 'envs': ['GrowSpace/Control-Easy-v0'], 'seeds': 2}])
     out = tmp_path / 'out'
     args = [str(spec), '--out', str(out), '--workers', '2', '--quiet', '--no-plots']
     assert sweep.main(args) == 0
     first = _read_csv(out / 'trials.csv')
-    state = max((out / 'tune').glob('experiment_state-*.json'))
+    state = max((out / 'tune').glob(f'{cut}-*.json'))  # Tune's search state is a pickle
     state.write_bytes(state.read_bytes()[:len(state.read_bytes()) // 2])  # a kill mid-write
     capsys.readouterr()
 

@@ -7,6 +7,7 @@ import contextlib
 import csv
 import json
 import os
+import pickle
 import shutil
 import socket
 import stat
@@ -301,23 +302,32 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
 def _set_aside_if_unreadable(path: Path, trials: int) -> None:
     """Rename a local Tune experiment whose newest state file was cut short, and say so.
 
-    Tune rewrites ``experiment_state-<session>.json`` in place, so a kill during a write leaves
-    a file that Tune cannot restore (one kill in seven in tests/test_sweep.py, which has Tune
-    write it at every step); Tune then logs a traceback and quietly runs every trial again.
-    Starting over is the only way from such a file (it is what says which trials finished), so
-    do it in the open and keep the old run's files.
+    Tune rewrites its state in place at every checkpoint: ``experiment_state-<session>.json``
+    (which trials finished) and its search algorithm's ``basic-variant-state-<session>.json``
+    (a pickle). A kill during a write leaves a file that Tune cannot restore (one kill in seven
+    in tests/test_sweep.py, which has Tune write them at every step); Tune then logs a
+    traceback and quietly runs every trial again, beside the old ones. Starting over is the only
+    way from such a file, so do it in the open and keep the old run's files.
     """
-    states = sorted(path.glob('experiment_state-*.json'))  # named by session start time
-    if not states:
-        return
+    def newest(pattern: str) -> Path | None:
+        files = sorted(path.glob(pattern))  # named by session start time
+        return files[-1] if files else None
+
+    state, search = newest('experiment_state-*.json'), newest('basic-variant-state-*.json')
+    broken = None
     try:
-        json.loads(states[-1].read_text())
+        if state is not None:
+            broken = state
+            json.loads(state.read_text())
+        if search is not None:
+            broken = search
+            pickle.loads(search.read_bytes())  # Tune's own file, as Tune itself reads it
         return
-    except ValueError:
+    except (ValueError, EOFError, pickle.UnpicklingError):
         pass
     aside = path.with_name(f'{path.name}-unreadable-{time.strftime("%Y%m%d-%H%M%S")}')
     path.rename(aside)
-    print(f'{states[-1]} is cut short: the sweep was killed while Ray Tune wrote it, so Tune '
+    print(f'{broken} is cut short: the sweep was killed while Ray Tune wrote it, so Tune '
           f'cannot tell which trials finished. All {trials} trials run again (each is seeded: '
           f'the same results); the old run is kept in {aside}.', file=sys.stderr)
 
