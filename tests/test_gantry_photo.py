@@ -288,6 +288,13 @@ def test_each_step_is_photographed_under_the_photo_light_and_answered_with_the_m
                 rig.transport.messages('gantry/status')[-1].status[0].values}
     assert rig.run_until(lambda: (status()['photo'], status()['photo_light']) == ('idle', 'off'))
 
+    # An unseeded reset: the camera is sent the episode's own chamber/config (seed None), not
+    # the last seeded one's.
+    rig.transport.inject('reset', types.new(types.RESET_REQUEST, reset_id=2, has_seed=False))
+    assert rig.run_until(lambda: rig.results()[-1].reset_id == 2)
+    config = rig.transport.messages('chamber/config')[-1].data
+    assert rig.asked[-1][0].config == config and json.loads(config)['seed'] is None
+
 
 def test_no_camera_service_answers_unavailable_and_switches_the_light_off(tmp_path) -> None:
     rig = CameraRig(tmp_path, capture_timeout_s=0.3)

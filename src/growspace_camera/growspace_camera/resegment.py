@@ -142,7 +142,8 @@ class _Writer:
         self.channels = {t: recorder.add_channel(t, i.typename, i.qos)
                          for t, i in bag.topics.items()}
         for name, data in bag.metadata.items():
-            recorder.add_metadata(name, data)
+            if name != RESEGMENT_METADATA:  # this run writes its own (it names its source)
+                recorder.add_metadata(name, data)
         self.image_frame = IMAGE_FRAME  # the recorded observations' frame, once one is seen
 
     def step(self, step: Step) -> None:

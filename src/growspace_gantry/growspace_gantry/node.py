@@ -108,7 +108,7 @@ class GantryNode:
         self.reset_id = 0
         self.last_step_id = 0
         self.steps = 0  # commands stepped in this episode
-        self.seed: int | None = None
+        self.config = ''  # the episode's chamber/config payload, also sent with each photo
         self.pending: tuple[int, int, float] | None = None  # (reset_id, step_id, deadline)
         self.safety = Safety(controller, Log(self.log.warn, self.log.info), self._fail_pending,
                              params.watchdog_s, clock())
@@ -142,8 +142,7 @@ class GantryNode:
         seed = params.seed if params.seed >= 0 else secrets.randbits(63)
         self._start_recording(seed)
         self.sim.reset(seed=seed)
-        self.seed = self.sim.seed
-        self._publish('config', types.new(types.STRING, data=self._config_payload(seed)))
+        self._publish_config(seed)
         # The machine does not move at start-up: the first command or reset moves it.
 
     # --- inputs ----------------------------------------------------------------------------
@@ -203,9 +202,9 @@ class GantryNode:
             self.log.warn('reset', f'reset: rejected reset_id {reset_id}: {e}')
             self._result(0, reset_id, info=f'error: {e}')
             return
-        self.sim, self.cfg, self.seed = sim, cfg, sim.seed
+        self.sim, self.cfg = sim, cfg
         self.reset_id, self.last_step_id, self.steps = reset_id, 0, 0
-        self._publish('config', types.new(types.STRING, data=self._config_payload(seed)))
+        self._publish_config(seed)
         self._move(target, 0, placing=True)
 
     def estop(self, source: str) -> str:
@@ -305,9 +304,9 @@ class GantryNode:
         light = self._reached_light(step_id, stamp)
         if self.photo is not None:
             chamber = self.sim.chamber
-            request = capture_request(stamp, step_id, self.steps, self._config_payload(
-                self.seed), light, self.cfg, chamber.target, chamber.target_mask,
-                self.params.frame_id)
+            request = capture_request(stamp, step_id, self.steps, self.config, light, self.cfg,
+                                      chamber.target, chamber.target_mask,
+                                      self.params.frame_id)
             self.photo.start(reset_id, step_id, stamp, light, request, self.clock())
             return
         self._publish('light', light)
@@ -342,12 +341,15 @@ class GantryNode:
             stamp_ns=self.transport.now_ns() if stamp is None else stamp,
             frame_id=self.params.frame_id, info=info))
 
-    def _config_payload(self, seed: int | None) -> str:
+    def _publish_config(self, seed: int | None) -> None:
+        """The new episode's chamber/config (its seed: None for an unseeded reset), kept to be
+        sent with each of its photos: the camera and the recording hold the same payload."""
         p, chamber = self.params, self.sim.chamber
-        return config_json(self.cfg, seed, mode=p.mode, rate_hz=0.0, frame_id=p.frame_id,
-                           reset_id=self.reset_id, episode=self.sim.episode,
-                           digit=self.sim.digit, source='gantry',
-                           target=target_payload(chamber.target, chamber.target_mask))
+        self.config = config_json(self.cfg, seed, mode=p.mode, rate_hz=0.0, frame_id=p.frame_id,
+                                  reset_id=self.reset_id, episode=self.sim.episode,
+                                  digit=self.sim.digit, source='gantry',
+                                  target=target_payload(chamber.target, chamber.target_mask))
+        self._publish('config', types.new(types.STRING, data=self.config))
 
     @staticmethod
     def _trigger(error: str, done: str = 'done') -> Any:

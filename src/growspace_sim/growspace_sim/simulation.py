@@ -62,14 +62,14 @@ class Simulation:
         sim._rng, sim._seed, sim._episode = self._rng, self._seed, self._episode
         return sim
 
-    def fork(self, cfg: SimConfig | None = None) -> Simulation:
+    def fork(self, cfg: SimConfig) -> Simulation:
         """Like ``with_config``, on a copy of the random stream: a reset of the fork lays out
         what this simulation's next reset would, and leaves this one as it was (a reset that
         may still be refused is tried on a fork, and kept only once accepted)."""
-        sim = self.with_config(cfg or self.cfg)
+        sim = self.with_config(cfg)
         sim._rng = copy.deepcopy(self._rng)
-        if cfg is None:
-            sim.target_digits = self.target_digits
+        if cfg == self.cfg:
+            sim.target_digits = self.target_digits  # a curriculum's digits go on
         return sim
 
     def set_target_digits(self, digits: Sequence[int]) -> None:

@@ -85,7 +85,8 @@ class RclpyClient:
                 self._logger.warn(f'client:{where}', f'{where}: dropped a malformed answer: {e}')
                 return
             safe(response)
-        future.add_done_callback(finished)
+        # rclpy's executor re-raises a done callback's exception out of spin: never let one out.
+        future.add_done_callback(guarded(self._logger, f'client:{where}', finished))
 
         def cancel() -> None:
             self._client.remove_pending_request(future)
