@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from growspace_gantry import photo
 from growspace_gantry.photo import outputs, Photographer
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.fake import FakeTransport
@@ -34,15 +33,15 @@ def response(ok: bool = True, reward: float = 0.25, stamp: int = 5, size: int = 
     image = convert.image_msg(np.full((size, size, 3), 7, np.uint8), stamp, 'chamber_camera') \
         if ok else types.new(types.IMAGE, encoding='rgb8')
     return types.new(
-        f'{photo.CAPTURE}_Response', observation=image,
+        f'{types.CAPTURE}_Response', observation=image,
         plant=types.new(types.PLANT_STATE, header=convert.header(stamp, 'chamber'),
                         node_x=np.array([0.4, 0.4]), node_z=np.array([0.0, 0.1]),
                         parent=np.array([-1, 0], np.int32), plant=np.zeros(2, np.uint8),
                         tips=np.array([1], np.uint32)) if ok else
         types.new(types.PLANT_STATE),
-        photo=types.new(photo.COMPRESSED, header=convert.header(stamp, 'camera_optical'),
+        photo=types.new(types.COMPRESSED_IMAGE, header=convert.header(stamp, 'camera_optical'),
                         format='jpeg', data=np.frombuffer(b'\xff\xd8\xff\xe0fake', np.uint8)),
-        measurement=types.new(photo.MEASUREMENT, header=convert.header(stamp, 'chamber'),
+        measurement=types.new(types.CAMERA_MEASUREMENT, header=convert.header(stamp, 'chamber'),
                               ok=ok, error_code=code, error=error,
                               reward=reward if ok else 0.0,
                               plant_rewards=np.array([reward] if ok else [], np.float64),
@@ -93,7 +92,7 @@ class Camera:
             self.transport.client = lambda srv, name: self.held
         self.requests: list[Any] = []
         if served is not None:
-            self.transport.serve(photo.CAPTURE, 'camera/capture',
+            self.transport.serve(types.CAPTURE, 'camera/capture',
                                  lambda req: self.requests.append(req) or served)
         self.light = PhotoLight(wired)
         self.answers: list[tuple[Any, Any, str]] = []
@@ -102,7 +101,7 @@ class Camera:
                                          lambda *answer: self.answers.append(answer))
 
     def start(self, now: float = 0.0) -> None:
-        request = types.new(f'{photo.CAPTURE}_Request', header=convert.header(STAMP, 'chamber'),
+        request = types.new(f'{types.CAPTURE}_Request', header=convert.header(STAMP, 'chamber'),
                             step_id=3, step=3)
         sim = Simulation(CFG)
         sim.reset(seed=1)
@@ -228,7 +227,7 @@ class CameraRig(Rig):
                                                                 **params})
         self.asked: list[tuple[Any, bool, str]] = []  # request, photo light on, state
         if answer is not None:
-            self.transport.serve(photo.CAPTURE, 'camera/capture', self._serve)
+            self.transport.serve(types.CAPTURE, 'camera/capture', self._serve)
         self.answer = answer
 
     def _serve(self, request: Any) -> Any:
@@ -383,8 +382,8 @@ def test_the_capture_request_carries_the_episodes_target(challenge) -> None:
     light = convert.light_msg(c.light, 4, STAMP, 'chamber')
     request = capture_request(STAMP, 4, 2, '{"config": {}}', light, cfg, c.target,
                               c.target_mask, 'chamber')
-    request = types.deserialize(types.serialize(request, f'{photo.CAPTURE}_Request'),
-                                f'{photo.CAPTURE}_Request')
+    request = types.deserialize(types.serialize(request, f'{types.CAPTURE}_Request'),
+                                f'{types.CAPTURE}_Request')
     assert (request.step_id, request.step, convert.to_ns(request.header.stamp)) == (4, 2, STAMP)
     assert request.light.x == c.light.x
     point, mask = target_from_payload(json.loads(json.dumps(target_payload(c.target,

@@ -23,10 +23,8 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import Light
 from growspace_sim.ros import convert, types
 
-CAPTURE = 'growspace_msgs/srv/Capture'
-MEASUREMENT = 'growspace_msgs/msg/CameraMeasurement'
-COMPRESSED = 'sensor_msgs/msg/CompressedImage'
-DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
+CAPTURE, MEASUREMENT = types.CAPTURE, types.CAMERA_MEASUREMENT
+COMPRESSED, DIAGNOSTICS = types.COMPRESSED_IMAGE, types.DIAGNOSTICS
 
 
 @functools.lru_cache(maxsize=8)

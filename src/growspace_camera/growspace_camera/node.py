@@ -36,7 +36,7 @@ from growspace_camera.settings import CameraParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert, qos as ros_qos, types
-from growspace_sim.ros.interface import OBSERVATION_QOS, Topic
+from growspace_sim.ros.interface import CAMERA_OUTPUTS, OBSERVATION_QOS, Topic
 from growspace_sim.simulation import Simulation
 
 POLL_S = 0.5  # how often a lost source is looked after [s]
@@ -46,12 +46,7 @@ OUTPUTS = (
     Topic('status', 'camera/status', wire.DIAGNOSTICS, OBSERVATION_QOS),
     Topic('segmentation', 'camera/segmentation', types.IMAGE, OBSERVATION_QOS),
 )
-REALTIME_OUTPUTS = (  # in the order a lockstep caller publishes them too
-    Topic('image', 'camera/image_raw', types.IMAGE, OBSERVATION_QOS),
-    Topic('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
-    Topic('photo', 'camera/photo', wire.COMPRESSED, OBSERVATION_QOS),
-    Topic('measurement', 'camera/measurement', wire.MEASUREMENT, OBSERVATION_QOS),
-)
+REALTIME_OUTPUTS = CAMERA_OUTPUTS  # in the order a lockstep caller publishes them too
 REALTIME_INPUTS = (
     Topic('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
     Topic('config', 'chamber/config', types.STRING, ros_qos.LATCHED),

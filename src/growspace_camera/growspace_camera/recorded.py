@@ -35,13 +35,12 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.recording import METADATA_NAME
 from growspace_sim.replay.bag import Bag, BagMessage, ReplayError
 from growspace_sim.ros import convert
-from growspace_sim.ros.interface import target_from_payload
+from growspace_sim.ros.interface import CAMERA_OUTPUTS, NAMES, target_from_payload
 from growspace_sim.simulation import Simulation
 
-PHOTO = 'camera/photo'
-IMAGE, PLANT, MEASUREMENT = 'camera/image_raw', 'plant/state', 'camera/measurement'
-LIGHT, RESULT, CONFIG = 'light/state', 'step_result', 'chamber/config'
-CAMERA_OUTPUTS = (IMAGE, PLANT, MEASUREMENT)  # what a photo's measurement decides
+IMAGE, PLANT, PHOTO, MEASUREMENT = (t.name for t in CAMERA_OUTPUTS)
+LIGHT, RESULT, CONFIG = NAMES['light'], NAMES['result'], NAMES['config']
+MEASURED = (IMAGE, PLANT, MEASUREMENT)  # the outputs a photo's measurement decides
 CAMERA_ERROR = 'error: camera: '  # the gantry's step_result info for a photo not measured
 
 
@@ -128,7 +127,7 @@ class RecordedSteps:
         names = bag.chamber_topics(namespace)
         prefix = names[RESULT][:-len(RESULT)]
         self.bag = bag
-        self.topics = {rel: prefix + rel for rel in (PHOTO, *CAMERA_OUTPUTS, LIGHT, RESULT,
+        self.topics = {rel: prefix + rel for rel in (PHOTO, *MEASURED, LIGHT, RESULT,
                                                      CONFIG)}
         self.names = {full: rel for rel, full in self.topics.items()}
         if self.topics[PHOTO] not in bag.topics:
@@ -167,7 +166,7 @@ class RecordedSteps:
         results = []
         for msg in group:
             rel = self.names.get(msg.topic)
-            if rel in (PHOTO, *CAMERA_OUTPUTS, LIGHT, RESULT):
+            if rel in (PHOTO, *MEASURED, LIGHT, RESULT):
                 decoded = msg.decode()
                 stamp = convert.to_ns(decoded.header.stamp)
                 stamps.setdefault(stamp, {})[rel] = msg
@@ -195,7 +194,7 @@ class RecordedSteps:
             if stamp in photographed:
                 continue
             result = next((r for s, r in results if s == stamp), None)
-            measured = any(rel in topics for rel in CAMERA_OUTPUTS) or (
+            measured = any(rel in topics for rel in MEASURED) or (
                 result is not None and not result.info)
             if measured and self.bag.damage:
                 step.lost.add(stamp)

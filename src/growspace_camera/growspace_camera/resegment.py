@@ -25,8 +25,8 @@ from growspace_camera import messages as wire
 from growspace_camera.errors import CameraError, NO_PHOTO
 from growspace_camera.pipeline import Measurement, Pipeline
 from growspace_camera.recorded import (
-    CAMERA_OUTPUTS, IMAGE, LIGHT, MEASUREMENT, PHOTO, PLANT, RecordedPhoto, RecordedSteps,
-    RESULT, Step, step_result_of)
+    IMAGE, LIGHT, MEASUREMENT, PHOTO, PLANT, RecordedPhoto, RecordedSteps,
+    MEASURED, RESULT, Step, step_result_of)
 from growspace_camera.settings import (
     CameraParams, load_layout, pipeline_values, with_overrides)
 from growspace_sim import __version__
@@ -34,12 +34,11 @@ from growspace_sim.recording import McapRecorder
 from growspace_sim.recording.scan import damage_metadata, RECOVERY_METADATA
 from growspace_sim.replay.bag import Bag, BagMessage, ReplayError
 from growspace_sim.ros import convert, types
-from growspace_sim.ros.interface import OBSERVATION_QOS
+from growspace_sim.ros.interface import CAMERA_OUTPUTS, OBSERVATION_QOS
 
 RESEGMENT_METADATA = 'growspace_resegment'
 IMAGE_FRAME = CameraParams().image_frame_id  # until the file shows the observations' frame
-TYPES = {IMAGE: types.IMAGE, PLANT: types.PLANT_STATE, MEASUREMENT: wire.MEASUREMENT,
-         RESULT: types.STEP_RESULT}
+TYPES = {**{t.name: t.typename for t in CAMERA_OUTPUTS}, RESULT: types.STEP_RESULT}
 LOST = 'the photo of this step is in an unreadable part of the recording: not measured again'
 
 
@@ -151,7 +150,7 @@ class _Writer:
         self.report.lost += len(step.lost)
         for msg in step.messages:
             rel = self.names.get(msg.topic)
-            if rel not in (*CAMERA_OUTPUTS, LIGHT, PHOTO, RESULT):
+            if rel not in (*MEASURED, LIGHT, PHOTO, RESULT):
                 self._copy(msg)
                 continue
             decoded = msg.decode()
@@ -162,14 +161,14 @@ class _Writer:
                 if rel == RESULT:
                     self._write(msg, RESULT, step_result_of(decoded, Measurement(
                         ok=False, error=CameraError(NO_PHOTO, LOST)), None))
-                elif rel not in CAMERA_OUTPUTS:
+                elif rel not in MEASURED:
                     self._copy(msg)
                 continue
             if stamp not in new:
                 self._copy(msg)
                 continue
             photo, m = new[stamp]
-            if rel in CAMERA_OUTPUTS:
+            if rel in MEASURED:
                 continue  # replaced: the new ones are written below, in the gantry's order
             if msg is photo.light or (rel == PHOTO and photo.light is None):
                 self._outputs(msg, photo, m, (IMAGE, PLANT))

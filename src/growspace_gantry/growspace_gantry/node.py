@@ -45,7 +45,7 @@ import numpy as np
 
 from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController, Log
-from growspace_gantry.photo import CAMERA_OUTPUTS, capture_request, outputs, Photographer, Shot
+from growspace_gantry.photo import capture_request, outputs, Photographer, Shot
 from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
 from growspace_gantry.status import diagnostics, DIAGNOSTICS
@@ -58,7 +58,7 @@ from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import (
-    COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS,
+    CAMERA_OUTPUTS, COMMAND_QOS, config_json, growspace_metadata, METADATA_NAME, OBSERVATION_QOS,
     target_payload, Topic)
 from growspace_sim.simulation import Simulation
 

@@ -27,19 +27,7 @@ import numpy as np
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.ros import convert, types
-from growspace_sim.ros.interface import OBSERVATION_QOS, Topic
 
-CAPTURE = 'growspace_msgs/srv/Capture'
-MEASUREMENT = 'growspace_msgs/msg/CameraMeasurement'
-COMPRESSED = 'sensor_msgs/msg/CompressedImage'
-# The camera's outputs the gantry publishes (and records), in the step's order around
-# light/state: image, plant, light, photo, measurement, then step_result.
-CAMERA_OUTPUTS = (
-    Topic('image', 'camera/image_raw', types.IMAGE, OBSERVATION_QOS),
-    Topic('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
-    Topic('photo', 'camera/photo', COMPRESSED, OBSERVATION_QOS),
-    Topic('measurement', 'camera/measurement', MEASUREMENT, OBSERVATION_QOS),
-)
 # Why the gantry got no measurement (the camera's own codes are CameraMeasurement.error_code).
 UNAVAILABLE = 'unavailable'  # no capture service within capture_timeout_s
 TIMEOUT = 'timeout'  # asked, and no answer within capture_timeout_s
@@ -93,7 +81,7 @@ class Photographer:
 
     def __init__(self, transport: Any, controller: Any, service: str, timeout_s: float,
                  settle_s: float, answer: Answer) -> None:
-        self.client = transport.client(CAPTURE, service)
+        self.client = transport.client(types.CAPTURE, service)
         self.service = transport.resolve(service)
         self.controller = controller
         self.timeout_s, self.settle_s = timeout_s, settle_s
@@ -177,7 +165,7 @@ def capture_request(stamp: int, step_id: int, step: int, config: str, light: Any
     point = target if cfg.task.digits is None else None
     shape = np.zeros(0, np.uint8) if mask is None or cfg.task.digits is None else \
         np.asarray(mask, np.uint8).reshape(-1)
-    return types.new(f'{CAPTURE}_Request', header=convert.header(stamp, frame_id),
+    return types.new(f'{types.CAPTURE}_Request', header=convert.header(stamp, frame_id),
                      step_id=step_id, step=step, config=config, light=light,
                      has_point_target=point is not None,
                      target_x=0.0 if point is None else float(point.real),

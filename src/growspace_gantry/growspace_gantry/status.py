@@ -15,7 +15,7 @@ from typing import Any
 from growspace_gantry import grbl
 from growspace_sim.ros import convert, types
 
-DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
+DIAGNOSTICS = types.DIAGNOSTICS
 OK, WARN, ERROR = 0, 1, 2
 
 

@@ -68,6 +68,15 @@ OUTPUTS = (
     Topic('light', 'light/state', types.LIGHT_COMMAND, OBSERVATION_QOS),
     Topic('result', 'step_result', types.STEP_RESULT, OBSERVATION_QOS),
 )
+# A camera's outputs for a step (camera_node's own in realtime; the gantry's, from the camera's
+# answer, in lockstep), in the step's order around light/state: image, plant, light, photo,
+# measurement, then step_result.
+CAMERA_OUTPUTS = (
+    Topic('image', 'camera/image_raw', types.IMAGE, OBSERVATION_QOS),
+    Topic('plant', 'plant/state', types.PLANT_STATE, OBSERVATION_QOS),
+    Topic('photo', 'camera/photo', types.COMPRESSED_IMAGE, OBSERVATION_QOS),
+    Topic('measurement', 'camera/measurement', types.CAMERA_MEASUREMENT, OBSERVATION_QOS),
+)
 TOPICS = INPUTS + OUTPUTS  # received messages are handled (and recorded) before the outputs
 NAMES = {topic.key: topic.name for topic in TOPICS}  # key ('result') -> name ('step_result')
 

@@ -35,10 +35,14 @@ STEP_RESULT = 'growspace_msgs/msg/StepResult'
 RESET = 'growspace_msgs/srv/Reset'
 RESET_SRV_REQUEST = f'{RESET}_Request'
 RESET_SRV_RESPONSE = f'{RESET}_Response'
+CAMERA_MEASUREMENT = 'growspace_msgs/msg/CameraMeasurement'
+CAPTURE = 'growspace_msgs/srv/Capture'
 # The standard types a chamber speaks besides its own (every type name is spelled here once).
 IMAGE = 'sensor_msgs/msg/Image'
 CLOCK = 'rosgraph_msgs/msg/Clock'
 STRING = 'std_msgs/msg/String'
+COMPRESSED_IMAGE = 'sensor_msgs/msg/CompressedImage'
+DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
 
 # Standard services our nodes offer that rosbags' Jazzy store lacks (std_srvs/srv/Trigger.srv;
 # an empty request is the one-byte placeholder struct rosidl generates).

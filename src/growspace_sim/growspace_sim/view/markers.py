@@ -74,7 +74,7 @@ def _empty() -> dict[str, Any]:
         'frame_locked': False,
         'colors': [],
         'texture_resource': '',
-        'texture': types.new('sensor_msgs/msg/CompressedImage'),
+        'texture': types.new(types.COMPRESSED_IMAGE),
         'uv_coordinates': [],
         'mesh_resource': '',
         'mesh_file': types.new('visualization_msgs/msg/MeshFile'),
