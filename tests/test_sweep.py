@@ -28,6 +28,7 @@ import yaml
 from conftest import child_env
 
 from growspace_sim import sweep
+from growspace_sim.sweep import trials as trials_module
 
 # Not imported here: sweep.connect() must set Ray's environment before ray's first import.
 
@@ -148,22 +149,18 @@ def test_sweep_killed_midway_resumes_without_rerunning_finished_trials(tmp_path,
     # state file short (Tune writes it at every step here): then every trial runs again.
     newest = max(finished, key=lambda k: finished[k][0]['started'])
     on_record = {k: v for k, v in finished.items() if k != newest}
-    state = max((out / 'tune').glob('experiment_state-*.json'))
-    search = max((out / 'tune').glob('basic-variant-state-*.json'), default=None)
-    try:
-        json.loads(state.read_text())
-        if search is not None:
-            pickle.loads(search.read_bytes())  # the search algorithm's state: cut short too
-    except (ValueError, EOFError, pickle.UnpicklingError):
-        on_record = {}
-
     assert sweep.main([str(spec), '--out', str(out), '--workers', '2', '--quiet',
                        '--no-plots']) == 0
 
     after = _finished(out)
     assert len(after) == n
-    if not on_record:  # the unreadable run was set aside whole
-        assert len(list(tmp_path.glob('out/tune-unreadable-*'))) == 1
+    # Unless the kill cut Tune's state short or between its two files: then the old run was
+    # set aside whole (test_a_tune_state_..._is_set_aside) and every trial ran again.
+    aside = list(tmp_path.glob('out/tune-unreadable-*'))
+    if aside:
+        [aside] = aside
+        assert {p.name for p in aside.iterdir()} >= set(finished)
+        on_record = {}
     for key, runs in on_record.items():  # still the one execution of the first sweep
         assert after[key] == runs, f'{key} ran again'
     for key in after.keys() - finished.keys():  # run by the second sweep, not a leftover
@@ -195,6 +192,29 @@ def test_a_tune_state_cut_short_is_set_aside_and_every_trial_runs_again(
     again = _read_csv(out / 'trials.csv')
     assert [(r['key'], r['status'], r['mean'], r['se']) for r in again] == \
         [(r['key'], r['status'], r['mean'], r['se']) for r in first]
+
+
+def test_a_search_state_that_runs_a_finished_trial_is_set_aside(tmp_path, capsys):
+    """Killed between Tune's two state files: the search algorithm still counts a trial as
+    running that the experiment state has finished, and Tune 2.60 would wait for it for ever."""
+    def experiment(live: set[str]) -> Path:
+        path = tmp_path / f'tune-{len(live)}'
+        path.mkdir()
+        trials = [[json.dumps({'trial_id': f'a_{i:05d}', 'status': 'TERMINATED'}), '{}']
+                  for i in range(2)]
+        (path / 'experiment_state-2026.json').write_text(json.dumps({'trial_data': trials}))
+        (path / 'basic-variant-state-2026.json').write_bytes(
+            pickle.dumps({'_live_trials': live, '_finished': False}))
+        return path
+
+    consistent, stale = experiment(set()), experiment({'a_00001'})
+    trials_module._set_aside_if_unreadable(consistent, 2)
+    trials_module._set_aside_if_unreadable(stale, 2)
+    assert consistent.exists() and not stale.exists()
+    assert len(list(tmp_path.glob('tune-1-unreadable-*'))) == 1
+    err = capsys.readouterr().err
+    assert 'still runs trial(s) a_00001 that experiment_state-2026.json has finished' in err
+    assert 'All 2 trials run again' in err
 
 
 def _group(pgid: int) -> list[int]:

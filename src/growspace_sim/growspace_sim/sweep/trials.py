@@ -300,36 +300,51 @@ def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
 
 
 def _set_aside_if_unreadable(path: Path, trials: int) -> None:
-    """Rename a local Tune experiment whose newest state file was cut short, and say so.
+    """Rename a local Tune experiment that Tune could not resume, and say so.
 
-    Tune rewrites its state in place at every checkpoint: ``experiment_state-<session>.json``
-    (which trials finished) and its search algorithm's ``basic-variant-state-<session>.json``
-    (a pickle). A kill during a write leaves a file that Tune cannot restore (one kill in seven
-    in tests/test_sweep.py, which has Tune write them at every step); Tune then logs a
-    traceback and quietly runs every trial again, beside the old ones. Starting over is the only
-    way from such a file, so do it in the open and keep the old run's files.
+    Tune rewrites its state at every checkpoint: ``experiment_state-<session>.json`` (which
+    trials finished) and its search algorithm's ``basic-variant-state-<session>.json`` (a
+    pickle), one after the other. A kill can leave one cut short (one kill in seven in
+    tests/test_sweep.py, which has Tune write them at every step): Tune then logs a traceback
+    and quietly runs every trial again, beside the old ones. A kill between the two writes can
+    leave a trial running in the search state that the experiment state has finished: Ray 2.60
+    then waits for it for ever with ``--workers`` set (the search algorithm's concurrency limit
+    stays full). Starting over is the only way from either, so do it in the open and keep the
+    old run's files. The files are read as Tune itself reads them (Ray is pinned); a shape
+    this does not know is left to Tune.
     """
     def newest(pattern: str) -> Path | None:
         files = sorted(path.glob(pattern))  # named by session start time
         return files[-1] if files else None
 
     state, search = newest('experiment_state-*.json'), newest('basic-variant-state-*.json')
-    broken = None
+    why = ''
     try:
+        finished = set()
         if state is not None:
-            broken = state
-            json.loads(state.read_text())
+            why = f'{state} is cut short'
+            for data in json.loads(state.read_text()).get('trial_data', []):
+                trial = json.loads(data[0]) if isinstance(data[0], str) else data[0]
+                if trial.get('status') in ('TERMINATED', 'ERROR'):
+                    finished.add(trial.get('trial_id'))
         if search is not None:
-            broken = search
-            pickle.loads(search.read_bytes())  # Tune's own file, as Tune itself reads it
-        return
-    except (ValueError, EOFError, pickle.UnpicklingError):
+            why = f'{search} is cut short'
+            searcher = pickle.loads(search.read_bytes())  # Tune's own file, as Tune reads it
+            live = searcher.get('_live_trials', set()) if isinstance(searcher, dict) else set()
+            if finished & set(live):
+                why = (f'{search} still runs trial(s) {", ".join(sorted(finished & set(live)))}'
+                       f' that {state.name} has finished')
+            else:
+                return
+        else:
+            return
+    except (ValueError, TypeError, AttributeError, IndexError, EOFError, pickle.UnpicklingError):
         pass
     aside = path.with_name(f'{path.name}-unreadable-{time.strftime("%Y%m%d-%H%M%S")}')
     path.rename(aside)
-    print(f'{broken} is cut short: the sweep was killed while Ray Tune wrote it, so Tune '
-          f'cannot tell which trials finished. All {trials} trials run again (each is seeded: '
-          f'the same results); the old run is kept in {aside}.', file=sys.stderr)
+    print(f'{why}: the sweep was killed while Ray Tune wrote its state, so Tune cannot resume '
+          f'it. All {trials} trials run again (each is seeded: the same results); the old run '
+          f'is kept in {aside}.', file=sys.stderr)
 
 
 def _trial_key(trial: Any) -> str:
