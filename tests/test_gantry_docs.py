@@ -109,6 +109,8 @@ def test_gantry_node_runs_as_written(tmp_path, line) -> None:
     with GrblEmulator(RIG, speedup=40.0, link_dir=tmp_path) as grbl:
         argv = shlex.split(line.replace('/dev/ttyUSB0', grbl.port).replace(
             'bags/hw.mcap', str(tmp_path / 'hw.mcap')).replace('$PWD', str(ROOT)))
+        # Never a real serial device: a line without the documented port would open the default.
+        assert f'port:={grbl.port}' in argv, line
         env = {**child_env(), 'PATH': os.pathsep.join([*map(str, readme_path()),
                                                        os.environ['PATH']])}
         proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.PIPE,

@@ -313,38 +313,44 @@ def _set_aside_if_unreadable(path: Path, trials: int) -> None:
     old run's files. The files are read as Tune itself reads them (Ray is pinned); a shape
     this does not know is left to Tune.
     """
-    def newest(pattern: str) -> Path | None:
-        files = sorted(path.glob(pattern))  # named by session start time
-        return files[-1] if files else None
-
-    state, search = newest('experiment_state-*.json'), newest('basic-variant-state-*.json')
-    why = ''
-    try:
-        finished = set()
-        if state is not None:
-            why = f'{state} is cut short'
-            for data in json.loads(state.read_text()).get('trial_data', []):
-                trial = json.loads(data[0]) if isinstance(data[0], str) else data[0]
-                if trial.get('status') in ('TERMINATED', 'ERROR'):
-                    finished.add(trial.get('trial_id'))
-        if search is not None:
-            why = f'{search} is cut short'
-            searcher = pickle.loads(search.read_bytes())  # Tune's own file, as Tune reads it
-            live = searcher.get('_live_trials', set()) if isinstance(searcher, dict) else set()
-            if finished & set(live):
-                why = (f'{search} still runs trial(s) {", ".join(sorted(finished & set(live)))}'
-                       f' that {state.name} has finished')
-            else:
-                return
-        else:
-            return
-    except (ValueError, TypeError, AttributeError, IndexError, EOFError, pickle.UnpicklingError):
-        pass
+    why = _why_unresumable(path)
+    if not why:
+        return
     aside = path.with_name(f'{path.name}-unreadable-{time.strftime("%Y%m%d-%H%M%S")}')
     path.rename(aside)
     print(f'{why}: the sweep was killed while Ray Tune wrote its state, so Tune cannot resume '
           f'it. All {trials} trials run again (each is seeded: the same results); the old run '
           f'is kept in {aside}.', file=sys.stderr)
+
+
+def _why_unresumable(path: Path) -> str:
+    """Why Tune could not resume the experiment in ``path`` ('' if it can, as far as we see)."""
+    def newest(pattern: str) -> Path | None:
+        files = sorted(path.glob(pattern))  # named by session start time
+        return files[-1] if files else None
+
+    state, search = newest('experiment_state-*.json'), newest('basic-variant-state-*.json')
+    finished: set[str] = set()
+    if state is not None:
+        try:
+            for data in json.loads(state.read_text()).get('trial_data', []):
+                trial = json.loads(data[0]) if isinstance(data[0], str) else data[0]
+                if trial.get('status') in ('TERMINATED', 'ERROR'):
+                    finished.add(trial.get('trial_id'))
+        except (ValueError, TypeError, AttributeError, IndexError):
+            return f'{state} is cut short'
+    if search is None:
+        return ''
+    try:
+        searcher = pickle.loads(search.read_bytes())  # Tune's own file, as Tune reads it
+    except (ValueError, EOFError, pickle.UnpicklingError):
+        return f'{search} is cut short'
+    live = searcher.get('_live_trials', ()) if isinstance(searcher, dict) else ()
+    stale = finished & set(live)
+    if stale and state is not None:
+        return f'{search} still runs trial(s) {", ".join(sorted(stale))} that {state.name} ' \
+            'has finished'
+    return ''
 
 
 def _trial_key(trial: Any) -> str:
