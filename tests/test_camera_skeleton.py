@@ -70,12 +70,20 @@ def test_a_fork_has_two_tips_and_one_shared_node():
     assert len(fork) == 1 and tree.nodes[fork[0]] == pytest.approx((0.1, 0.1), abs=0.005)
 
 
-def test_a_short_nub_is_a_pruned_spur_not_a_tip():
+def test_a_short_thick_nub_is_a_pruned_spur_not_a_tip():
     stem = mask_of([(0.1, 0.0), (0.1, 0.15)], width_m=0.02)
-    stem |= mask_of([(0.1, 0.08), (0.118, 0.085)], width_m=0.006)  # sticks out 8 mm
+    stem |= mask_of([(0.1, 0.08), (0.118, 0.085)], width_m=0.014)  # sticks out 8 mm
     tree = tree_of(stem)
     assert tree.tips.size == 1 and tree.tips_pruned >= 1
     assert tree_of(stem, spur_m=0.0, spur_radii=0.0).tips.size == 2  # unpruned: a tip
+
+
+def test_a_short_shoot_narrowing_to_its_end_is_a_tip_not_a_spur():
+    stem = mask_of([(0.1, 0.0), (0.1, 0.15)], width_m=0.02)
+    stem |= mask_of([(0.1, 0.08), (0.118, 0.085)], width_m=0.004)  # as long, but thin
+    tree = tree_of(stem)
+    assert tree.tips.size == 2 and near(tree.nodes[tree.tips], (0.118, 0.085), 0.01)
+    assert tree_of(stem, spur_taper=0.0).tips.size == 1  # without the taper rule: a spur
 
 
 def test_two_stems_are_two_plants_left_to_right():

@@ -39,7 +39,7 @@ class SegmentParams:
         max_saturated: A photo with more clipped pixels than this is overexposed [0-1].
     """
 
-    pixel_m: float = 0.002
+    pixel_m: float = 0.0025
     min_greenness: float = 0.06
     min_contrast: float = 0.08
     min_area_m2: float = 0.0001
@@ -123,8 +123,8 @@ def exposure(gray: np.ndarray, params: SegmentParams) -> Exposure:
 def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
     """The grid's view of the plane, warped from the photo (float32 BGR).
 
-    The photo's chamber region is first shrunk (area interpolation) to about one photo pixel
-    per grid pixel, so the warp samples without aliasing.
+    The photo's chamber region is first shrunk (area interpolation, by a whole factor) to one
+    photo pixel or a little more per grid pixel, so the warp samples without aliasing.
     """
     rows, cols = grid.shape
     corners = fit.photo_points(grid.xz(np.array([0, 0, rows - 1, rows - 1]),
@@ -132,14 +132,16 @@ def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
     h, w = photo.shape[:2]
     left, top = np.floor(np.clip(corners.min(axis=0) - 4, 0, [w - 1, h - 1])).astype(int)
     right, bottom = np.ceil(np.clip(corners.max(axis=0) + 5, 1, [w, h])).astype(int)
+    # An integer factor, the largest that keeps a photo pixel or more per grid pixel: OpenCV's
+    # area shrink is then a plain block mean, several times faster than a fractional one.
+    factor = max(1, int(grid.pixel_m * fit.px_per_m((0.5 * grid.width_m, 0.5 * grid.height_m))))
+    right -= (right - left) % factor
+    bottom -= (bottom - top) % factor
     crop = photo[top:bottom, left:right]
-    scale = min(1.0, 1.0 / (grid.pixel_m * fit.px_per_m((0.5 * grid.width_m,
-                                                          0.5 * grid.height_m))))
-    if scale < 0.95:
-        crop = cv2.resize(crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    else:
-        scale = 1.0
-    sy, sx = crop.shape[0] / (bottom - top), crop.shape[1] / (right - left)
+    if factor > 1:
+        crop = cv2.resize(crop, ((right - left) // factor, (bottom - top) // factor),
+                          interpolation=cv2.INTER_AREA)
+    sy = sx = 1.0 / factor
     # grid pixel -> plane -> photo -> crop -> shrunk crop (pixel centres throughout)
     shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5 - left * sx],
                        [0.0, sy, 0.5 * sy - 0.5 - top * sy], [0.0, 0.0, 1.0]])

@@ -61,7 +61,7 @@ class CameraParams:
                            bounds=Bounds(0, MAX_SEED, integer=True))
     seed: int = seed_param("seed of the first episode's target when no chamber/config came")
     markers: str = param('', 'marker layout YAML; empty = the installed config/markers.yaml')
-    pixel_size_m: float = param(0.002, 'side of a rectified pixel on the plant plane', unit='m',
+    pixel_size_m: float = param(0.0025, 'side of a rectified pixel on the plant plane', unit='m',
                                 bounds=Bounds(0.0005, 0.02))
     min_greenness: float = param(0.06, 'lowest excess-green threshold (an empty pot stays '
                                  'empty)', unit='1', bounds=Bounds(0.0, 1.0))
@@ -79,6 +79,9 @@ class CameraParams:
                           bounds=Bounds(0.0, 0.5))
     spur_radii: float = param(2.0, '... or shorter than this many stem radii', unit='radii',
                               bounds=Bounds(0.0, 20.0))
+    spur_taper: float = param(0.5, 'a short end branch thinner at its end than this fraction '
+                              'of the stem it leaves is a shoot, not a spur', unit='1',
+                              bounds=Bounds(0.0, 1.0), rule='0 = every short one is a spur')
     corner_deg: float = param(15.0, 'a skeleton turning this much has a node there',
                               unit='deg', bounds=Bounds(1.0, 90.0))
     min_stem_m: float = param(0.05, 'a stem base carrying less plant than this is a speck',

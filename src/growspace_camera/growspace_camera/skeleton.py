@@ -36,7 +36,9 @@ class TreeParams:
     Attributes:
         base_band_m: Skeleton within this height of the floor is a stem base [m].
         spur_m: End branches shorter than this are spurs [m] ...
-        spur_radii: ... or shorter than this many stem radii at their junction.
+        spur_radii: ... or shorter than this many stem radii at their junction ...
+        spur_taper: ... unless their end is thinner than this fraction of that radius: a shoot
+            narrows to its tip, while a thinning spur ends inside the thick stem it leaves.
         corner_deg: A path turning by at least this much has a node there [deg].
         min_stem_m: A base carrying less skeleton than this is a speck, not a plant [m].
     """
@@ -44,6 +46,7 @@ class TreeParams:
     base_band_m: float = 0.03
     spur_m: float = 0.015
     spur_radii: float = 2.0
+    spur_taper: float = 0.5
     corner_deg: float = 15.0
     min_stem_m: float = 0.05
 
@@ -140,7 +143,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
     ancestor = _ancestors(pred, CHORD_PX)
     arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
     removed, ends, pruned = _prune(order, pred, arc, _degree(src, dst, n), radius, roots,
-                                   max(params.spur_m / grid.pixel_m, 1.0), params.spur_radii)
+                                   max(params.spur_m / grid.pixel_m, 1.0), params)
     keep = ~removed[src] & ~removed[dst]
     junction = _degree(src[keep], dst[keep], n) >= 3
     return SkeletonGraph(
@@ -303,9 +306,10 @@ def _turning(ancestor: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.nda
 
 def _prune(order: np.ndarray, pred: np.ndarray, arc: np.ndarray, degree: np.ndarray,
            radius: np.ndarray, roots: np.ndarray, spur_px: float,
-           spur_radii: float) -> tuple[np.ndarray, list[int], int]:
+           params: TreeParams) -> tuple[np.ndarray, list[int], int]:
     """Remove spurs: end branches shorter than ``spur_px`` or ``spur_radii`` radii of the
-    stem they leave. Returns (removed pixels, kept end points, spurs removed)."""
+    stem they leave whose end is not thinner than ``spur_taper`` of that radius.
+    Returns (removed pixels, kept end points, spurs removed)."""
     n = pred.size
     is_root = np.zeros(n, bool)
     is_root[roots] = True
@@ -320,7 +324,8 @@ def _prune(order: np.ndarray, pred: np.ndarray, arc: np.ndarray, degree: np.ndar
         if is_root[p]:
             continue
         a = anchor[p]
-        if not is_root[a] and arc[p] - arc[a] < max(spur_px, spur_radii * radius[a]):
+        if not is_root[a] and arc[p] - arc[a] < max(spur_px, params.spur_radii * radius[a]) \
+                and radius[p] > params.spur_taper * radius[a]:
             pruned += 1
             while p != a:
                 removed[p] = True
