@@ -96,7 +96,7 @@ def measured_state(tree: PlantTree, cfg: SimConfig, light: Light, target: Target
     res = cfg.resolution
     occupancy = np.zeros((res, res), bool)
     if target.mask is not None:
-        _rasterise(occupancy, pos, parent, cfg)
+        rasterise(occupancy, pos, parent, cfg)
     empty = np.zeros(0)
     return ChamberState(
         pos=pos, parent=parent, plant=tree.plant.astype(np.int16), has_child=has_child,
@@ -133,9 +133,10 @@ class Observer:
         return renderer.render(chamber)
 
 
-def _rasterise(occupancy: np.ndarray, pos: np.ndarray, parent: np.ndarray,
-               cfg: SimConfig) -> None:
-    """Mark the pixels each segment passes, with the simulator's own rasteriser."""
+def rasterise(occupancy: np.ndarray, pos: np.ndarray, parent: np.ndarray,
+              cfg: SimConfig) -> None:
+    """Mark the pixels each segment passes (its centre line, as the shape reward counts them),
+    with the simulator's own rasteriser, on a square grid over the chamber of any size."""
     res = occupancy.shape[0]
     pixel = cfg.chamber_width / res
     longest = max(cfg.branch_length_m, cfg.width_m(cfg.first_branch_height))
