@@ -86,12 +86,17 @@ def test_view_node_publishes_markers_and_image_when_subscribed(chamber: dict) ->
     got['images'].clear()
     reset = client.reset(1, has_seed=True, seed=11)
     step = client.step(1, 0)
-    assert client.spin_until(lambda: len(got['markers']) >= 2 and len(got['images']) >= 2)
-    stamps = [(m.markers[0].header.stamp.sec, m.markers[0].header.stamp.nanosec)
-              for m in got['markers']]
-    for res in (reset, step):
-        assert (res.header.stamp.sec, res.header.stamp.nanosec) in stamps
-    first = got['markers'][stamps.index((reset.header.stamp.sec, reset.header.stamp.nanosec))]
+
+    def stamps() -> list[tuple[int, int]]:
+        return [(m.markers[0].header.stamp.sec, m.markers[0].header.stamp.nanosec)
+                for m in got['markers']]
+
+    # Frames of the warm-up episode still in flight may arrive after the clear: wait for this
+    # reset's and this step's own frames, by their stamps.
+    wanted = [(r.header.stamp.sec, r.header.stamp.nanosec) for r in (reset, step)]
+    assert client.spin_until(lambda: set(wanted) <= set(stamps()) and len(got['images']) >= 2), \
+        f'frames stamped {wanted} not received; got {stamps()}'
+    first = got['markers'][stamps().index(wanted[0])]
     assert first.markers[0].action == markers.DELETEALL  # the reset's frame
     assert {m.header.frame_id for m in first.markers} == {'chamber'}
     ns = {(m.ns, m.id) for m in first.markers[1:]}
