@@ -207,6 +207,15 @@ def test_bad_parameters_are_refused_with_the_name_value_and_range(params, match)
         CameraParams(**params)
 
 
+def test_camera_nodes_defaults_are_the_pipelines():
+    # Each pipeline setting has its default twice (camera_node's parameter, the pipeline's
+    # dataclass); the bench measures Pipeline() as "what camera_node starts with".
+    from growspace_camera.markers import MarkerLayout
+    from growspace_camera.pipeline import PipelineParams
+
+    assert CameraParams().pipeline(MarkerLayout()) == PipelineParams(MarkerLayout())
+
+
 def test_bad_marker_files_are_refused_naming_the_file_and_key(tmp_path):
     with pytest.raises(ParamError, match='cannot be read'):
         load_layout(str(tmp_path / 'nope.yaml'))
