@@ -39,6 +39,7 @@ from growspace_camera.settings import (
     CameraParams, load_layout, PIPELINE_FIELDS, pipeline_values, read_overrides, with_overrides)
 from growspace_camera.sheet import describe, write_sheet
 from growspace_camera.twin import PhotoTwin
+from growspace_sim import arguments
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import initial_light
@@ -50,33 +51,40 @@ from growspace_sim.simulation import Simulation
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``growspace-camera``."""
-    parser = argparse.ArgumentParser(prog='growspace-camera', description=__doc__.split('\n')[0])
+    parser = arguments.Parser(prog='growspace-camera', description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
     markers = sub.add_parser('markers', help='write the printable marker sheet (SVG)')
-    markers.add_argument('sheet', help='the SVG file to write (e.g. sheet.svg)')
+    markers.add_argument('sheet', type=arguments.new_file,
+                         help='the SVG file to write (e.g. sheet.svg)')
     twin = sub.add_parser('twin', help='photograph a simulated episode with the photo twin')
-    twin.add_argument('out', help='folder for the photos (created)')
-    twin.add_argument('--steps', type=int, default=50)
+    twin.add_argument('out', type=arguments.folder, help='folder for the photos (created)')
+    twin.add_argument('--steps', type=arguments.integer(0), default=50,
+                      help='oracle steps after the first photo (default 50: 51 photos)')
     measure = sub.add_parser('measure', help='measure photos with the camera pipeline')
-    measure.add_argument('photos', nargs='+')
-    measure.add_argument('--target-x', type=float, help='point target x [m]')
-    measure.add_argument('--target-z', type=float, help='point target z [m]')
-    measure.add_argument('--overlay', help='write the segmentation pictures to this folder')
+    measure.add_argument('photos', nargs='+', type=arguments.existing_file)
+    measure.add_argument('--target-x', type=arguments.number(), help='point target x [m]')
+    measure.add_argument('--target-z', type=arguments.number(), help='point target z [m]')
+    measure.add_argument('--overlay', type=arguments.folder,
+                         help='write the segmentation pictures to this folder')
     for p in (markers, twin, measure):
-        p.add_argument('--markers', default='', help='marker layout YAML (default: installed)')
+        p.add_argument('--markers', type=arguments.existing_file,
+                       help='marker layout YAML (default: installed)')
     reseg = sub.add_parser('resegment', help="measure a rig's recording again with other "
                                              'settings, into a new recording')
-    reseg.add_argument('bag', help='the recording (gantry_node record_path, with a camera)')
-    reseg.add_argument('out', help='the new .mcap file (never an existing one)')
+    reseg.add_argument('bag', type=arguments.existing_file,
+                       help='the recording (gantry_node record_path, with a camera)')
+    reseg.add_argument('out', type=arguments.new_file,
+                       help='the new .mcap file (never an existing one)')
     export = sub.add_parser('export', help="a rig's recorded photos with what the camera saw")
-    export.add_argument('bag')
-    export.add_argument('out', help='folder for the pictures (created; or an empty one)')
+    export.add_argument('bag', type=arguments.existing_file)
+    export.add_argument('out', type=arguments.folder,
+                        help='folder for the pictures (created; or an empty one)')
     export.add_argument('--format', default='jpg', choices=FORMATS)
-    export.add_argument('--scale', type=float, default=0.5,
+    export.add_argument('--scale', type=arguments.number(*SCALE_RANGE), default=0.5,
                         help=f'picture size relative to the photo, {SCALE_RANGE[0]}..'
                              f'{SCALE_RANGE[1]} (default 0.5)')
     for p in (reseg, export):
-        p.add_argument('--params', metavar='FILE.yaml',
+        p.add_argument('--params', metavar='FILE.yaml', type=arguments.existing_file,
                        help="pipeline settings: name: value, or camera_node's ROS params file")
         p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                        help=f'one pipeline setting (after --params), of: '
@@ -87,12 +95,12 @@ def main(argv: list[str] | None = None) -> int:
                        help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
                             'of your own (default control)')
         p.add_argument('--setting', default='easy', help='a setting of the challenge')
-        p.add_argument('--seed', type=int, default=0)
+        p.add_argument('--seed', type=arguments.SEED, default=0)
     args = parser.parse_args(argv)
     if args.command in ('resegment', 'export'):
         return _recorded(args)
     try:
-        layout = load_layout(args.markers)
+        layout = load_layout(args.markers or '')
         cfg = SimConfig(challenge=args.challenge, setting=args.setting) \
             if args.command != 'markers' else None
     except (ParamError, ValueError) as e:

@@ -9,13 +9,13 @@ refuse it too.
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections.abc import Iterator
 import sys
 
 from growspace_gantry import calibration, grbl
 from growspace_gantry.main import default_calibration
+from growspace_sim import arguments
 from growspace_sim.core.light import Light
 from growspace_sim.replay.bag import Bag, ReplayError
 from growspace_sim.replay.episodes import read_episodes
@@ -25,9 +25,19 @@ def gcode_lines(bag_path: str, cal: calibration.Calibration, episode: int | None
                 lamp_power: float = 1.0) -> Iterator[str]:
     """The dry run, line by line (comments start with ``;``).
 
+    Args:
+        bag_path: The recording.
+        cal: The rig's calibration.
+        episode: 0-based (negative from the end); None = every episode.
+        lamp_power: The fraction of the calibration's full power (``lamp_max_s``), 0..1.
+
     Raises:
         ReplayError: the bag cannot be read or has no such episode.
+        ValueError: ``lamp_power`` outside 0..1 (more would exceed the rig's ``$30``).
     """
+    if not 0.0 <= lamp_power <= 1.0:
+        raise ValueError(f'lamp_power = {lamp_power!r} is not allowed; expected a fraction of '
+                         f'full power in [0, 1]')
     with Bag(bag_path) as bag:
         episodes = read_episodes(bag)
     if episode is not None:
@@ -63,12 +73,13 @@ def gcode_lines(bag_path: str, cal: calibration.Calibration, episode: int | None
 
 def main(argv: list[str] | None = None) -> int:
     """Console script; exit 0, or 2 with one line on an unreadable bag or calibration."""
-    parser = argparse.ArgumentParser(prog='growspace-gantry-gcode', description=__doc__.split(
-        '\n')[0])
-    parser.add_argument('bag')
-    parser.add_argument('--calibration', help='default: the installed config/gantry.yaml')
+    parser = arguments.Parser(prog='growspace-gantry-gcode', description=__doc__.split('\n')[0])
+    parser.add_argument('bag', type=arguments.existing_file)
+    parser.add_argument('--calibration', type=arguments.existing_file,
+                        help='default: the installed config/gantry.yaml')
     parser.add_argument('--episode', type=int, help='0-based, -1 = last; default: all')
-    parser.add_argument('--lamp-power', type=float, default=1.0, help='fraction of full power')
+    parser.add_argument('--lamp-power', type=arguments.number(0, 1), default=1.0,
+                        help="fraction of the calibration's full power (lamp_max_s), 0..1")
     args = parser.parse_args(argv)
     try:
         cal = calibration.load(args.calibration or default_calibration())

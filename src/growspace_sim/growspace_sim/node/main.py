@@ -73,6 +73,13 @@ def installed_executable() -> str:
     return os.path.join(get_package_prefix('growspace_sim'), 'lib', 'growspace_sim', 'sim_node')
 
 
+_ROS_RULES = {  # rcl's names of the rules a user writes, and what each must look like
+    'remap rule': 'FROM:=TO of valid ROS names, e.g. -r __ns:=/lab/chamber1 (tokens of letters, '
+                  'digits and _, one / between them)',
+    'parameter override rule': 'NAME:=VALUE, e.g. -p seed:=3',
+}
+
+
 def ros_arguments_error(argv: Sequence[str]) -> str | None:
     """Why rcl cannot parse a ROS command line, in one line; None if it can.
 
@@ -82,14 +89,23 @@ def ros_arguments_error(argv: Sequence[str]) -> str | None:
     Args:
         argv: the whole command line, executable first.
     """
+    from rclpy.logging import LoggingSeverity, set_logger_level
     from rclpy.utilities import remove_ros_args
 
+    # rcl also logs a warning of its own for some errors (a namespace that is not fully
+    # qualified), a second line that says less than the one we print.
+    set_logger_level('rcl', LoggingSeverity.ERROR)
     try:
         remove_ros_args(list(argv))
     except RuntimeError as e:  # rclpy's RCLInvalidROSArgsError and UnknownROSArgsError
         text = re.sub(r', at \S+:\d+', '', str(e))  # rcl's source locations mean nothing here
-        text = text.removeprefix('Failed to parse ROS arguments: ')
-        return ' '.join(text.split())
+        text = ' '.join(text.removeprefix('Failed to parse ROS arguments: ').split())
+        for kind, allowed in _ROS_RULES.items():  # rcl's lexer positions say nothing to a user
+            if text.startswith(f"Couldn't parse {kind}"):
+                text = f'{text.split(". Error: ")[0]}; expected {allowed}'
+        return text
+    finally:
+        set_logger_level('rcl', LoggingSeverity.UNSET)  # rcl's warnings of the run itself
     return None
 
 

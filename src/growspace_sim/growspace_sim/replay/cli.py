@@ -8,7 +8,8 @@ import sys
 
 from tqdm import tqdm
 
-from growspace_sim import recording
+from growspace_sim import arguments, recording
+from growspace_sim.digits import SOURCES as DIGIT_SOURCES
 from growspace_sim.replay.bag import ReplayError
 from growspace_sim.replay.compare import compare, format_comparison
 from growspace_sim.replay.episodes import format_summary, summary
@@ -19,7 +20,7 @@ from growspace_sim.replay.resim import resimulate
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``growspace-replay`` command line (the tests parse the README's lines with it)."""
-    parser = argparse.ArgumentParser(
+    parser = arguments.Parser(
         prog='growspace-replay', description=__doc__.split('\n')[0],
         epilog="The photos of a rig's recording (gantry_node with camera_node): "
                '`growspace-camera resegment IN.mcap OUT.mcap --set NAME=VALUE` measures them '
@@ -27,38 +28,40 @@ def build_parser() -> argparse.ArgumentParser:
                'DIR` draws what the camera saw on each (docs/recording.md).')
     sub = parser.add_subparsers(dest='command', required=True)
     p_info = sub.add_parser('info', help='episodes, returns, steps and duration')
-    p_info.add_argument('bag')
+    p_info.add_argument('bag', type=arguments.existing_file)
     p_info.add_argument('--namespace')
     p_info.add_argument('--json', action='store_true', help='print JSON instead of a table')
     p_check = sub.add_parser('check', help='re-simulate and compare bit for bit')
-    p_check.add_argument('bag')
+    p_check.add_argument('bag', type=arguments.existing_file)
     p_check.add_argument('--namespace')
-    p_check.add_argument('--digit-source', help="override the recorded one ('auto', 'idx', ...)")
+    p_check.add_argument('--digit-source', choices=DIGIT_SOURCES,
+                         help='override the recorded one')
     p_export = sub.add_parser('export', help='one episode to GIF or MP4; with --view, a copy '
                               'of the recording with the view added')
-    p_export.add_argument('bag')
-    p_export.add_argument('out', help='.gif or .mp4; .mcap with --view')
+    p_export.add_argument('bag', type=arguments.existing_file)
+    p_export.add_argument('out', type=arguments.new_file, help='.gif or .mp4; .mcap with --view')
     p_export.add_argument('--view', action='store_true',
                           help='write OUT.mcap: every message, plus plant/markers and '
                                'camera/image_view after each step_result (as view_node)')
-    p_export.add_argument('--view-size', type=int, default=512,
+    p_export.add_argument('--view-size', type=arguments.integer(16, 4096), default=512,
                           help='view image width [px], 16..4096 (default 512)')
     p_export.add_argument('--episode', type=int, default=0, help='0-based; -1 = last')
-    p_export.add_argument('--fps', type=float,
+    p_export.add_argument('--fps', type=arguments.number(*FPS_RANGE),
                           help=f'frames per second, {FPS_RANGE[0]}..{FPS_RANGE[1]} '
                                f'(default: the recorded rate, brought into that range)')
-    p_export.add_argument('--scale', type=int, default=4,
+    p_export.add_argument('--scale', type=arguments.integer(*SCALE_RANGE), default=4,
                           help=f'upscaling of each frame, {SCALE_RANGE[0]}..{SCALE_RANGE[1]} '
                                f'(default 4)')
     p_export.add_argument('--namespace')
     p_export.add_argument('--overwrite', action='store_true')
     p_play = sub.add_parser('play', help='republish on the topics over ROS 2; with '
                             '--step-period, step by step onto a lockstep node (the gantry)')
-    p_play.add_argument('bag')
+    p_play.add_argument('bag', type=arguments.existing_file)
     speed = p_play.add_mutually_exclusive_group()
-    speed.add_argument('--rate', type=float, default=1.0, help='speed factor (1 = original)')
+    speed.add_argument('--rate', type=arguments.number(0, low_open=True), default=1.0,
+                       help='speed factor (1 = original)')
     speed.add_argument('--fast', action='store_true', help='as fast as possible')
-    speed.add_argument('--step-period', type=float, metavar='SECONDS',
+    speed.add_argument('--step-period', type=arguments.number(0), metavar='SECONDS',
                        help="step by step onto a lockstep node: each episode's reset, then "
                             'each command once the previous step_result came, at least SECONDS '
                             'apart (0: as fast as the node answers; 3600: a real plant on the '
@@ -66,31 +69,35 @@ def build_parser() -> argparse.ArgumentParser:
     p_play.add_argument('--topics', '--only', nargs='+',
                         help='recorded topic names to publish, e.g. /growspace/light/command '
                              '(not with --step-period: it sends resets and commands)')
-    p_play.add_argument('--domain-id', type=int, help='default: ROS_DOMAIN_ID')
-    p_play.add_argument('--wait', type=float, help='seconds to wait for subscribers first '
-                        '(default 1; 10 with --step-period)')
+    p_play.add_argument('--domain-id', type=arguments.DOMAIN_ID, help='default: ROS_DOMAIN_ID')
+    p_play.add_argument('--wait', type=arguments.number(0),
+                        help='seconds to wait for subscribers first (default 1; 10 with '
+                             '--step-period)')
     steps = p_play.add_argument_group('step by step (--step-period)')
     steps.add_argument('--episode', type=int, help='only this episode (0-based, -1 = last)')
-    steps.add_argument('--start-step', type=int, default=1, metavar='STEP_ID',
+    steps.add_argument('--start-step', type=arguments.integer(1), default=1, metavar='STEP_ID',
                        help='the first step_id to play; the light is placed where the '
                             'recording had it before')
-    steps.add_argument('--stop-step', type=int, metavar='STEP_ID', help='the last step_id')
+    steps.add_argument('--stop-step', type=arguments.integer(1), metavar='STEP_ID',
+                       help='the last step_id')
     steps.add_argument('--keep-going', action='store_true',
                        help='go on after a step that fails on the node (default: stop)')
-    steps.add_argument('--step-timeout', type=float, default=600.0, metavar='SECONDS',
+    steps.add_argument('--step-timeout', type=arguments.number(0, low_open=True), default=600.0,
+                       metavar='SECONDS',
                        help='give up when a step has no step_result for this long')
     steps.add_argument('--namespace', help='the chamber namespace in the recording')
     p_compare = sub.add_parser('compare', help='applied light of B against A, step by step '
                                                '(e.g. a simulated run and its gantry replay)')
-    p_compare.add_argument('a', help='the reference recording')
-    p_compare.add_argument('b', help='the recording to compare with it')
+    p_compare.add_argument('a', type=arguments.existing_file, help='the reference recording')
+    p_compare.add_argument('b', type=arguments.existing_file,
+                           help='the recording to compare with it')
     p_compare.add_argument('--namespace-a')
     p_compare.add_argument('--namespace-b')
-    p_compare.add_argument('--tolerance-mm', type=float,
+    p_compare.add_argument('--tolerance-mm', type=arguments.number(0),
                            help='exit 1 if any field of B is farther than this from A')
     p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')
-    p_recover.add_argument('bag')
-    p_recover.add_argument('out')
+    p_recover.add_argument('bag', type=arguments.existing_file)
+    p_recover.add_argument('out', type=arguments.new_file)
     return parser
 
 
@@ -108,12 +115,19 @@ def main(argv: list[str] | None = None) -> int:
             info = summary(args.bag, args.namespace)
             print(json.dumps(info, indent=2) if args.json else format_summary(info))
         elif args.command == 'check':
-            with tqdm(desc='check', unit='episode') as bar:
-                def progress(done: int, total: int) -> None:
-                    bar.total = total
-                    bar.update(done - bar.n)
+            bars: list[tqdm] = []  # drawn once there is progress: not before an error
+
+            def progress(done: int, total: int) -> None:
+                if not bars:
+                    bars.append(tqdm(desc='check', unit='episode', total=total))
+                bars[0].total = total
+                bars[0].update(done - bars[0].n)
+            try:
                 report = resimulate(args.bag, args.namespace, digit_source=args.digit_source,
                                     progress=progress)
+            finally:
+                for bar in bars:
+                    bar.close()
             for warning in report.warnings:
                 warn(warning)
             for part in report.unreadable:

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 
+from growspace_sim import arguments
 from growspace_sim.learn import evaluate_policies
 from growspace_sim.sweep.report import summarise
 from growspace_sim.sweep.spec import BASELINES, flags_spec, LEARNERS, load_spec, Spec, SpecError
@@ -17,27 +18,32 @@ from growspace_sim.sweep.trials import connect, disconnect, run_sweep
 def main(argv: list[str] | None = None) -> int:
     import growspace_sim.sweep as package  # its docstring is the command's help
 
-    parser = argparse.ArgumentParser(prog='growspace-sweep',
-                                     description=package.__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=package.__doc__.split('Usage::')[1].split(
-                                         '\n\nModules:')[0])
-    parser.add_argument('spec', nargs='?', help='a YAML spec file (else the flags below)')
+    parser = arguments.Parser(prog='growspace-sweep',
+                              description=package.__doc__.splitlines()[0],
+                              formatter_class=argparse.RawDescriptionHelpFormatter,
+                              epilog=package.__doc__.split('Usage::')[1].split(
+                                  '\n\nModules:')[0])
+    parser.add_argument('spec', nargs='?', type=arguments.existing_file,
+                        help='a YAML spec file (else the flags below)')
     parser.add_argument('--agents', help=f'comma-separated: {", ".join(BASELINES + LEARNERS)}')
     parser.add_argument('--envs', help='comma-separated GrowSpace ids')
     parser.add_argument('--seeds', default='1', help='a count (0..n-1) or a comma list')
-    parser.add_argument('--steps', type=int, help='training steps (learners)')
-    parser.add_argument('--episodes', type=int, default=50, help='evaluation episodes per trial')
-    parser.add_argument('--eval-seed', type=int, default=10_000, help='first evaluation seed')
+    parser.add_argument('--steps', type=arguments.integer(1), help='training steps (learners)')
+    parser.add_argument('--episodes', type=arguments.integer(2), default=50,
+                        help='evaluation episodes per trial (2 or more: a standard error)')
+    parser.add_argument('--eval-seed', type=arguments.SEED, default=10_000,
+                        help='first evaluation seed')
     parser.add_argument('--name', help='experiment name (default: the spec file name)')
-    parser.add_argument('--out', help='results folder (default runs/sweeps/<name>)')
+    parser.add_argument('--out', type=arguments.folder,
+                        help='results folder (default runs/sweeps/<name>)')
     parser.add_argument('--storage', help="Ray Tune's storage: a folder every node of a "
                                           'cluster sees, or a URI (default: OUT)')
     parser.add_argument('--address', help='a Ray cluster to use (default: $RAY_ADDRESS, else '
                                           'a local instance on 127.0.0.1)')
-    parser.add_argument('--workers', type=int, help='trials at once (default: all CPUs)')
-    parser.add_argument('--cpus-per-trial', type=float, default=1.0)
-    parser.add_argument('--gpus-per-trial', type=float, default=0.0)
+    parser.add_argument('--workers', type=arguments.integer(1),
+                        help='trials at once (default: all CPUs)')
+    parser.add_argument('--cpus-per-trial', type=arguments.number(0, low_open=True), default=1.0)
+    parser.add_argument('--gpus-per-trial', type=arguments.number(0), default=0.0)
     parser.add_argument('--retry-errored', action='store_true',
                         help='on resume, run failed trials again')
     parser.add_argument('--fresh-processes', action='store_true',
@@ -45,8 +51,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-plots', action='store_true')
     parser.add_argument('--quiet', action='store_true', help='no Ray Tune status tables')
     args = parser.parse_args(argv)
-    if args.workers is not None and args.workers < 1:
-        parser.error(f'--workers must be >= 1, got {args.workers}')
     try:
         if args.spec:
             if args.agents or args.envs:

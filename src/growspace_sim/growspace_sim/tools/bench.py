@@ -38,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 
 import growspace_sim  # noqa: F401  (registers the ids)
+from growspace_sim import arguments
 from growspace_sim.agents.evaluation import play_episodes
 from growspace_sim.core import light as lights
 from growspace_sim.core import task as tasks
@@ -151,12 +152,17 @@ def best_of(repeats: int, fn, *args):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--episodes', type=int, default=200, help='timed episodes per repeat')
-    parser.add_argument('--repeats', type=int, default=3)
-    parser.add_argument('--seed', type=int, default=0)
-    parser.add_argument('--challenges', default=','.join(tasks.names()))
-    parser.add_argument('--num-envs', default='1,16,64,256',
+    parser = arguments.Parser(prog='growspace-bench', description=__doc__.splitlines()[0])
+    parser.add_argument('--episodes', type=arguments.integer(1), default=200,
+                        help='timed episodes per repeat')
+    parser.add_argument('--repeats', type=arguments.integer(1), default=3)
+    parser.add_argument('--seed', type=arguments.SEED, default=0)
+    parser.add_argument('--challenges', type=arguments.comma_separated(_easy_challenge),
+                        default=','.join(tasks.names()),
+                        help=f'comma-separated, of {", ".join(tasks.names())}')
+    parser.add_argument('--num-envs', type=arguments.comma_separated(arguments.integer(1),
+                                                                     empty=True),
+                        default='1,16,64,256',
                         help='vector env sizes, comma-separated ("" for none)')
     parser.add_argument('--no-resources', action='store_true',
                         help='skip the table of resources against episode length and density')
@@ -174,6 +180,15 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _easy_challenge(name: str) -> str:
+    """A challenge the benchmark can run (it times the easy setting)."""
+    task = tasks.get(name)
+    if 'easy' not in task.settings:
+        raise ValueError(f'challenge {name!r} has no easy setting (it has '
+                         f'{", ".join(task.settings)}); the benchmark times the easy one')
+    return name
+
+
 def _report(args: argparse.Namespace) -> None:
     print(f'GrowSpace env benchmark: {args.episodes} x 50-step episodes, best of {args.repeats}, '
           f'1 CPU, steps per CPU second, numpy {np.__version__}, '
@@ -181,7 +196,7 @@ def _report(args: argparse.Namespace) -> None:
     print('| challenge | env steps/s | (wall) | core steps/s | env/core | reset ms '
           '| segments at step 50 | target |')
     print('|---|---|---|---|---|---|---|---|')
-    for challenge in args.challenges.split(','):
+    for challenge in args.challenges:
         name = env_id(challenge, 'easy')
         run_env(name, 1, args.seed)  # warm-up: imports, caches, first allocations
         rate, wall, reset_s, segments = best_of(args.repeats, run_env, name, args.episodes,
@@ -192,7 +207,7 @@ def _report(args: argparse.Namespace) -> None:
             f'>= {target:,}: {"met" if rate >= target else "NOT met"}'
         print(f'| {challenge} | {rate:,.0f} | {wall:,.0f} | {core:,.0f} | {rate / core:.2f} | '
               f'{reset_s * 1e3:.2f} | {segments:.1f} | {verdict} |')
-    sizes = [int(n) for n in args.num_envs.split(',') if n]
+    sizes = args.num_envs
     if sizes:
         _report_vector(args, sizes)
     print(f'\npeak RSS {peak_rss_mib():.0f} MiB\n')
@@ -209,7 +224,7 @@ def _report(args: argparse.Namespace) -> None:
 def _report_vector(args: argparse.Namespace, sizes: list[int]) -> None:
     print('\n| challenge | ' + ' | '.join(f'vector N={n}' for n in sizes) + ' | target |')
     print('|---|' + '---|' * len(sizes) + '---|')
-    for challenge in args.challenges.split(','):
+    for challenge in args.challenges:
         name = env_id(challenge, 'easy')
         run_vector(name, sizes[0], 1, args.seed)  # warm-up
         rates = {n: best_of(args.repeats, run_vector, name, n, args.episodes, args.seed)[0]

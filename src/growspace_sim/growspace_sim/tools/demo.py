@@ -11,14 +11,13 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from growspace_sim import replay
+from growspace_sim import arguments, replay
 from growspace_sim.agents import OracleAgent, play_episodes, RandomAgent
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
@@ -69,9 +68,10 @@ def check_and_export(path: Path) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--out', default='bags', help='parent directory (default: bags/)')
-    parser.add_argument('--seed', type=int, default=0)
+    parser = arguments.Parser(prog='growspace-demo', description=__doc__.splitlines()[0])
+    parser.add_argument('--out', type=arguments.folder, default='bags',
+                        help='parent directory (default: bags/)')
+    parser.add_argument('--seed', type=arguments.SEED, default=0)
     parser.add_argument('--setting', default='hard',
                         choices=sorted({s for task in tasks.all_tasks() for s in task.settings}))
     parser.add_argument('--no-ros', action='store_true',

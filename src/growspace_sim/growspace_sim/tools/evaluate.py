@@ -9,13 +9,13 @@ standard error over the episodes. Usage::
 
 from __future__ import annotations
 
-import argparse
 import csv
 from dataclasses import dataclass
 import sys
 import time
 
 import growspace_sim  # noqa: F401  (registers the ids)
+from growspace_sim import arguments
 from growspace_sim.agents.evaluation import evaluate as play, has_oracle, make_agent, mean_se
 from growspace_sim.core import task as tasks
 from growspace_sim.envs.registration import env_id, register_envs
@@ -62,22 +62,21 @@ def markdown(rows: list[Row]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--episodes', type=int, default=100, help='episodes per agent and case')
-    parser.add_argument('--seed', type=int, default=0, help='first episode seed')
-    parser.add_argument('--challenges', default=','.join(tasks.names()),
+    parser = arguments.Parser(prog='growspace-eval', description=__doc__.splitlines()[0])
+    parser.add_argument('--episodes', type=arguments.integer(2), default=100,
+                        help='episodes per agent and case (2 or more: a standard error)')
+    parser.add_argument('--seed', type=arguments.SEED, default=0, help='first episode seed')
+    known = arguments.checked(tasks.get)
+    parser.add_argument('--challenges', type=arguments.comma_separated(known),
+                        default=','.join(tasks.names()),
                         help='comma-separated; a name or module:attribute of your own Task')
     parser.add_argument('--settings', help="comma-separated; default: each challenge's own")
-    parser.add_argument('--csv', help='also write the rows to this CSV file')
+    parser.add_argument('--csv', type=arguments.new_file,
+                        help='also write the rows to this CSV file')
     args = parser.parse_args(argv)
-    if args.episodes < 2:
-        parser.error(f'--episodes must be >= 2 for a standard error, got {args.episodes}')
     cases = []
-    for challenge in args.challenges.split(','):
-        try:
-            task = tasks.get(challenge)
-        except ValueError as e:
-            parser.error(f'--challenges: {e}')
+    for challenge in args.challenges:
+        task = tasks.get(challenge)
         settings = args.settings.split(',') if args.settings else task.settings
         cases += [(challenge, setting) for setting in settings]
         unknown = sorted(set(settings) - set(task.settings))

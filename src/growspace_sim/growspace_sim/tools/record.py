@@ -22,7 +22,7 @@ import sys
 import time
 from typing import Any
 
-from growspace_sim import recording
+from growspace_sim import arguments, recording
 from growspace_sim.agents.evaluation import AGENTS, make_agent, play_episodes
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
@@ -118,26 +118,28 @@ def _write_metadata(recorder: recording.McapRecorder, text: str, namespace: str)
 def main(argv: list[str] | None = None) -> int:
     """``growspace-record`` entry point."""
     logging.basicConfig(level=logging.WARNING, format='%(levelname)s: %(message)s')
-    parser = argparse.ArgumentParser(prog='growspace-record', description=__doc__.split('\n')[0])
+    parser = arguments.Parser(prog='growspace-record', description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
+    namespace = arguments.checked(names.normalize_namespace)
     p_run = sub.add_parser('run', help='run episodes in-process and record them')
-    p_run.add_argument('out')
-    p_run.add_argument('--challenge', default='control',
+    p_run.add_argument('out', type=arguments.new_file)
+    p_run.add_argument('--challenge', type=arguments.checked(tasks.get), default='control',
                        help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
                        'of your own')
     p_run.add_argument('--setting', default='easy', help='a setting of the challenge')
-    p_run.add_argument('--episodes', type=int, default=1)
+    p_run.add_argument('--episodes', type=arguments.integer(1), default=1)
     p_run.add_argument('--agent', choices=AGENTS, default='oracle')
-    p_run.add_argument('--seed', type=int, default=0, help='episode i uses seed + i')
-    p_run.add_argument('--rate-hz', type=float, default=10.0)
+    p_run.add_argument('--seed', type=arguments.SEED, default=0, help='episode i uses seed + i')
+    p_run.add_argument('--rate-hz', type=arguments.number(0, low_open=True), default=10.0)
     p_run.add_argument('--realtime', action='store_true', help='pace steps at rate-hz')
-    p_run.add_argument('--namespace', default=DEFAULT_NAMESPACE)
+    p_run.add_argument('--namespace', type=namespace, default=DEFAULT_NAMESPACE)
     p_run.add_argument('--overwrite', action='store_true')
     p_sub = sub.add_parser('subscribe', help="record a running chamber's topics over ROS 2")
-    p_sub.add_argument('out')
-    p_sub.add_argument('--namespace', default=DEFAULT_NAMESPACE)
-    p_sub.add_argument('--duration', type=float, help='seconds; default: until Ctrl-C')
-    p_sub.add_argument('--domain-id', type=int, help='default: ROS_DOMAIN_ID')
+    p_sub.add_argument('out', type=arguments.new_file)
+    p_sub.add_argument('--namespace', type=namespace, default=DEFAULT_NAMESPACE)
+    p_sub.add_argument('--duration', type=arguments.number(0, low_open=True),
+                       help='seconds; default: until Ctrl-C')
+    p_sub.add_argument('--domain-id', type=arguments.DOMAIN_ID, help='default: ROS_DOMAIN_ID')
     p_sub.add_argument('--overwrite', action='store_true')
     args = parser.parse_args(argv)
     try:

@@ -10,7 +10,6 @@ Usage: ``ros2 run growspace_sim teleop --ros-args -r __ns:=/chamber1`` or
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 import curses
 import json
@@ -18,6 +17,7 @@ import secrets
 import sys
 from typing import Any
 
+from growspace_sim import arguments
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import COMMAND_QOS, OBSERVATION_QOS
@@ -142,10 +142,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.utilities import remove_ros_args
 
+    from growspace_sim.node.main import ros_arguments_error
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = argparse.ArgumentParser(
+    error = ros_arguments_error(['teleop', *argv])
+    if error is not None:  # a bad namespace, remap or params file: before any screen
+        print(f'teleop: invalid ROS arguments: {error}', file=sys.stderr)
+        return 2
+    parser = arguments.Parser(
         prog='teleop', description=__doc__.split('\n')[0],
         epilog=f'Keys: {HELP}. ROS arguments come after --ros-args, e.g. '
                '--ros-args -r __ns:=/chamber1.')
