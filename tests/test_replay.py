@@ -284,23 +284,36 @@ def test_rosbag2_v8_qos_integers_and_garbage() -> None:
 
 
 @pytest.mark.parametrize('option, value, message', [
-    ('--fps', '-1', r'fps = -1.0 is not allowed; expected frames per second in \[0.1, 100.0\]'),
-    ('--fps', '0', r'fps = 0.0 is not allowed'),
-    ('--fps', 'nan', r'fps = nan is not allowed'),
-    ('--fps', '1e9', r'fps = 1000000000.0 is not allowed'),
-    ('--scale', '0', r'scale = 0 is not allowed; expected an integer in \[1, 16\]'),
-    ('--scale', '100000', r'scale = 100000 is not allowed'),
+    ('--fps', '-1', r'--fps: -1 is not allowed; expected a number in \[0.1, 100\]'),
+    ('--fps', '0', r'--fps: 0 is not allowed'),
+    ('--fps', 'nan', r'--fps: nan is not allowed'),
+    ('--fps', '1e9', r'--fps: 1e9 is not allowed'),
+    ('--scale', '0', r'--scale: 0 is not allowed; expected an integer in \[1, 16\]'),
+    ('--scale', '100000', r'--scale: 100000 is not allowed'),
 ])
 def test_export_options_out_of_range_are_one_line_and_exit_2(tmp_path, capsys, option, value,
                                                               message):
     from growspace_sim.replay.cli import main  # noqa: PLC0415
 
     out = tmp_path / 'e.gif'
-    assert main(['export', str(BAGS / 'oracle_control_easy.mcap'), str(out), option,
-                 value]) == 2
+    with pytest.raises(SystemExit) as exited:  # argparse's exit, before anything is read
+        main(['export', str(BAGS / 'oracle_control_easy.mcap'), str(out), option, value])
+    assert exited.value.code == 2
     err = capsys.readouterr().err
-    assert len(err.strip().splitlines()) == 1 and err.startswith('growspace-replay: error: ')
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith('growspace-replay export: error: argument ')
     assert re.search(message, err), err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize('option, message', [
+    ({'fps': 0.0}, r'fps = 0.0 is not allowed; expected frames per second in \[0.1, 100.0\]'),
+    ({'scale': 17}, r'scale = 17 is not allowed; expected an integer in \[1, 16\]'),
+])
+def test_export_episode_itself_refuses_options_out_of_range(tmp_path, option, message):
+    out = tmp_path / 'e.gif'  # a program calling it directly gets the same bounds as the CLI
+    with pytest.raises(ReplayError, match=message):
+        replay.export_episode(BAGS / 'oracle_control_easy.mcap', out, **option)
     assert not out.exists()
 
 
