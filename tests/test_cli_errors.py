@@ -301,3 +301,28 @@ def test_a_node_with_a_bad_parameter_value_says_so_in_one_line(
                          timeout=120, env=child_env())
     assert out.returncode == 2, out.stderr
     _one_line(out.stderr, words)
+
+
+RUN_SH_BAD_ARGUMENTS = {  # run.sh subcommand and arguments: what the error line must hold
+    ('eval', '--seed', '-4'): 'growspace-eval: error: argument --seed: -4 is not allowed',
+    ('bench', '--episodes', '-5'): 'growspace-bench: error: argument --episodes: -5 is not',
+    ('sweep', '--workers', '0'): 'growspace-sweep: error: argument --workers: 0 is not allowed',
+    ('demo', '--seed', '-1'): 'growspace-demo: error: argument --seed: -1 is not allowed',
+}
+
+
+def test_run_sh_passes_a_bad_argument_on_and_says_so_in_one_line(tmp_path: Path) -> None:
+    import subprocess
+
+    from conftest import child_env
+
+    runs = {case: subprocess.Popen([str(ROOT / 'run.sh'), *case], cwd=tmp_path, text=True,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                   env=child_env()) for case in RUN_SH_BAD_ARGUMENTS}
+    for case, proc in runs.items():  # started together: each pays its imports at once
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, (case, err)
+        # Beside the error, only run.sh's own line saying where bench, sweep and demo run.
+        lines = [line for line in err.strip().splitlines()
+                 if not line.startswith(('Running inside a loopback-only', 'No private network'))]
+        _one_line('\n'.join(lines), RUN_SH_BAD_ARGUMENTS[case])
