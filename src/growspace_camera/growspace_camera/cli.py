@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                             f'{", ".join(PIPELINE_FIELDS)}')
         p.add_argument('--namespace', help='the chamber namespace (default: the only one)')
     for p in (twin, measure):
-        p.add_argument('--challenge', default='control',
+        p.add_argument('--challenge', type=arguments.checked(tasks.get), default='control',
                        help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '
                             'of your own (default control)')
         p.add_argument('--setting', default='easy', help='a setting of the challenge')
@@ -99,12 +99,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command in ('resegment', 'export'):
         return _recorded(args)
+    cfg = None
+    if args.command != 'markers':
+        try:  # the setting's names depend on the challenge: checked together
+            cfg = SimConfig(challenge=args.challenge, setting=args.setting)
+        except ValueError as e:
+            sub.choices[args.command].error(f'argument --setting: {e}')
     try:
         layout = load_layout(args.markers or '')
-        cfg = SimConfig(challenge=args.challenge, setting=args.setting) \
-            if args.command != 'markers' else None
-    except (ParamError, ValueError) as e:
-        print(f'growspace-camera: {e}', file=sys.stderr)
+    except ParamError as e:
+        if args.markers:
+            sub.choices[args.command].error(f'argument --markers: {e}')
+        print(f'growspace-camera: error: {e}', file=sys.stderr)  # the installed layout
         return 2
     if args.command == 'markers':
         for path in write_sheet(layout, args.sheet):

@@ -142,6 +142,11 @@ def main(argv: list[str] | None = None) -> int:
     p_sub.add_argument('--domain-id', type=arguments.DOMAIN_ID, help='default: ROS_DOMAIN_ID')
     p_sub.add_argument('--overwrite', action='store_true')
     args = parser.parse_args(argv)
+    if args.command == 'run':
+        try:  # the setting's names depend on the challenge: checked together, before any file
+            SimConfig(challenge=args.challenge, setting=args.setting)
+        except ValueError as e:
+            p_run.error(f'argument --setting: {e}')
     try:
         return run(args) if args.command == 'run' else subscribe(args)
     except (recording.RecordingError, ValueError) as e:  # a bad challenge, setting, file
