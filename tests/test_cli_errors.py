@@ -82,6 +82,8 @@ BAD_ARGUMENTS = [
     ('growspace-demo', ['--seed', '-1'], 'argument --seed: -1 is not allowed'),
     ('growspace-demo', ['--setting', 'nope'], "argument --setting: invalid choice: 'nope'"),
     ('growspace-demo', ['--out', '{file}'], "argument --out: '{file}' is a file"),
+    ('growspace-demo', ['--out', '{file}/sub'],
+     "argument --out: '{file}/sub': '{file}' is a file"),
     ('growspace-record', ['run', 'x.mcap', '--episodes', '-1'],
      'argument --episodes: -1 is not allowed'),
     ('growspace-record', ['run', 'x.mcap', '--episodes', '0'],
@@ -104,6 +106,7 @@ BAD_ARGUMENTS = [
     ('growspace-replay', ['info', 'nosuch.mcap'], "argument bag: 'nosuch.mcap': the file does"),
     ('growspace-replay', ['info', '{dir}'], "argument bag: '{dir}' is not a file"),
     ('growspace-replay', ['check', 'nosuch.mcap'], "argument bag: 'nosuch.mcap'"),
+    ('growspace-replay', ['check', '{file}'], 'is not an MCAP file'),  # and no progress bar
     ('growspace-replay', ['check', '{bag}', '--digit-source', 'nope'],
      "argument --digit-source: invalid choice: 'nope'"),
     ('growspace-replay', ['export', '{bag}', f'{MISSING}/a.gif'],
