@@ -317,6 +317,12 @@ def test_export_episode_itself_refuses_options_out_of_range(tmp_path, option, me
     assert not out.exists()
 
 
+def test_export_episode_into_a_missing_folder_fails_before_rendering(tmp_path, capsys):
+    with pytest.raises(ReplayError, match='the folder .*missing does not exist'):
+        replay.export_episode(BAGS / 'oracle_control_easy.mcap', tmp_path / 'missing' / 'e.gif')
+    assert 'frame' not in capsys.readouterr().err  # no progress bar was drawn
+
+
 def test_export_help_states_the_bounds(capsys):
     from growspace_sim.replay.cli import main  # noqa: PLC0415
 

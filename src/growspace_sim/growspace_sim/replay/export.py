@@ -44,8 +44,9 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         The number of frames written.
 
     Raises:
-        ReplayError: Unreadable recording, no such episode, an existing output, an unknown
-            extension, ``fps`` or ``scale`` out of range, or no MP4 encoder.
+        ReplayError: Unreadable recording, no such episode, an existing output or a missing
+            folder for it, an unknown extension, ``fps`` or ``scale`` out of range, or no MP4
+            encoder.
     """
     out = Path(out)
     suffix = out.suffix.lower()
@@ -53,6 +54,8 @@ def export_episode(path: str | os.PathLike, out: str | os.PathLike, *, episode: 
         raise ReplayError(f'Cannot export to {out}: use a .gif or .mp4 file name.')
     if out.exists() and not overwrite:
         raise ReplayError(f'{out} exists already, not overwriting.')
+    if not out.parent.is_dir():  # found out now, not after rendering every frame
+        raise ReplayError(f'Cannot export to {out}: the folder {out.parent} does not exist.')
     if fps is not None and not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
         raise ReplayError(f'fps = {fps!r} is not allowed; expected frames per second in '
                           f'[{FPS_RANGE[0]}, {FPS_RANGE[1]}].')
