@@ -89,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                        help=f'one pipeline setting (after --params), of: '
                             f'{", ".join(PIPELINE_FIELDS)}')
-        p.add_argument('--namespace', help='the chamber namespace (default: the only one)')
+        p.add_argument('--namespace', type=arguments.namespace,
+                       help='the chamber namespace (default: the only one)')
     for p in (twin, measure):
         p.add_argument('--challenge', type=arguments.checked(tasks.get), default='control',
                        help=f'one of {", ".join(tasks.names())}, or module:attribute of a Task '

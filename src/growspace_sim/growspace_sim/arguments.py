@@ -164,6 +164,18 @@ def checked(check: Callable[[str], Any]) -> Callable[[str], str]:
     return parse
 
 
+def namespace(text: str) -> str:
+    """A ``type=`` for a ROS namespace (``/lab/chamber1``; relative ones are taken from ``/``),
+    checked as rcl checks it; the text is kept as given."""
+    from growspace_sim.ros.names import normalize_namespace
+
+    try:
+        normalize_namespace(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f'{text!r} is not allowed: {e}') from None
+    return text
+
+
 def json_object(text: str) -> dict[str, Any]:
     """A ``type=`` for a JSON object (``'{"light_density": 400}'``)."""
     import json

@@ -29,11 +29,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest='command', required=True)
     p_info = sub.add_parser('info', help='episodes, returns, steps and duration')
     p_info.add_argument('bag', type=arguments.existing_file)
-    p_info.add_argument('--namespace')
+    p_info.add_argument('--namespace', type=arguments.namespace)
     p_info.add_argument('--json', action='store_true', help='print JSON instead of a table')
     p_check = sub.add_parser('check', help='re-simulate and compare bit for bit')
     p_check.add_argument('bag', type=arguments.existing_file)
-    p_check.add_argument('--namespace')
+    p_check.add_argument('--namespace', type=arguments.namespace)
     p_check.add_argument('--digit-source', choices=DIGIT_SOURCES,
                          help='override the recorded one')
     p_export = sub.add_parser('export', help='one episode to GIF or MP4; with --view, a copy '
@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.add_argument('--scale', type=arguments.integer(*SCALE_RANGE), default=4,
                           help=f'upscaling of each frame, {SCALE_RANGE[0]}..{SCALE_RANGE[1]} '
                                f'(default 4)')
-    p_export.add_argument('--namespace')
+    p_export.add_argument('--namespace', type=arguments.namespace)
     p_export.add_argument('--overwrite', action='store_true')
     p_play = sub.add_parser('play', help='republish on the topics over ROS 2; with '
                             '--step-period, step by step onto a lockstep node (the gantry)')
@@ -85,14 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
     steps.add_argument('--step-timeout', type=arguments.number(0, low_open=True), default=600.0,
                        metavar='SECONDS',
                        help='give up when a step has no step_result for this long')
-    steps.add_argument('--namespace', help='the chamber namespace in the recording')
+    steps.add_argument('--namespace', type=arguments.namespace,
+                       help='the chamber namespace in the recording')
     p_compare = sub.add_parser('compare', help='applied light of B against A, step by step '
                                                '(e.g. a simulated run and its gantry replay)')
     p_compare.add_argument('a', type=arguments.existing_file, help='the reference recording')
     p_compare.add_argument('b', type=arguments.existing_file,
                            help='the recording to compare with it')
-    p_compare.add_argument('--namespace-a')
-    p_compare.add_argument('--namespace-b')
+    p_compare.add_argument('--namespace-a', type=arguments.namespace)
+    p_compare.add_argument('--namespace-b', type=arguments.namespace)
     p_compare.add_argument('--tolerance-mm', type=arguments.number(0),
                            help='exit 1 if any field of B is farther than this from A')
     p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')

@@ -120,7 +120,6 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format='%(levelname)s: %(message)s')
     parser = arguments.Parser(prog='growspace-record', description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
-    namespace = arguments.checked(names.normalize_namespace)
     p_run = sub.add_parser('run', help='run episodes in-process and record them')
     p_run.add_argument('out', type=arguments.new_file)
     p_run.add_argument('--challenge', type=arguments.checked(tasks.get), default='control',
@@ -132,11 +131,11 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument('--seed', type=arguments.SEED, default=0, help='episode i uses seed + i')
     p_run.add_argument('--rate-hz', type=arguments.number(0, low_open=True), default=10.0)
     p_run.add_argument('--realtime', action='store_true', help='pace steps at rate-hz')
-    p_run.add_argument('--namespace', type=namespace, default=DEFAULT_NAMESPACE)
+    p_run.add_argument('--namespace', type=arguments.namespace, default=DEFAULT_NAMESPACE)
     p_run.add_argument('--overwrite', action='store_true')
     p_sub = sub.add_parser('subscribe', help="record a running chamber's topics over ROS 2")
     p_sub.add_argument('out', type=arguments.new_file)
-    p_sub.add_argument('--namespace', type=namespace, default=DEFAULT_NAMESPACE)
+    p_sub.add_argument('--namespace', type=arguments.namespace, default=DEFAULT_NAMESPACE)
     p_sub.add_argument('--duration', type=arguments.number(0, low_open=True),
                        help='seconds; default: until Ctrl-C')
     p_sub.add_argument('--domain-id', type=arguments.DOMAIN_ID, help='default: ROS_DOMAIN_ID')
