@@ -40,7 +40,9 @@ def main() -> int:
         for setting in task.settings:
             path = args.out / f'{agent_name}_{task.name}_{setting}.mcap'
             try:
-                recorder = McapRecorder(path, overwrite=args.force)
+                # Chunks by size only: a chunk closed by wall time would make the bytes depend
+                # on how busy the machine was (the tracked bags are compared byte for byte).
+                recorder = McapRecorder(path, overwrite=args.force, flush_period_s=0)
             except RecordingError as e:
                 print(f'make_sample_bags: {e} (--force replaces it)', file=sys.stderr)
                 return 2
