@@ -5,7 +5,7 @@ Example (the same YAML value as the ``ros2`` command line)::
     python -m growspace_sim.tools.pub light/command growspace_msgs/msg/LightCommand \\
         "{mode: 0, x: 0.3, width: 0.1}"
 
-Waits (up to ``--wait`` seconds) until it is matched with every reader of the topic that the
+Waits (up to ``--wait`` seconds, 10 by default) until it is matched with every reader of the topic that the
 ROS graph shows, and with the nodes named by ``--node``; publishes once with the node's command
 QoS (reliable); then waits until every reader acknowledged the message, so that none is lost on
 exit; and says which nodes got it. Waiting for the first reader only lost messages: with
@@ -43,7 +43,7 @@ POLL_S = 0.02  # how often the graph and the matches are looked at while waiting
 
 def is_node(wanted: str, node: str) -> bool:
     """Whether ``node`` (fully qualified) is the node named ``wanted``: fully qualified
-    (``/chamber1/sim_node``) or by its name alone (``sim_node``, in any namespace)."""
+    (``/chamber1/growspace_sim``) or by its name alone (``growspace_sim``, in any namespace)."""
     return node == wanted if wanted.startswith('/') else node.rsplit('/', 1)[1] == wanted
 
 
@@ -116,12 +116,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                         f'light/command) or absolute (e.g. /chamber1/reset)')
     parser.add_argument('type', help='message type, e.g. growspace_msgs/msg/LightCommand')
     parser.add_argument('values', nargs='?', default='{}', help='YAML mapping of field values')
-    parser.add_argument('--wait', type=float, default=5.0,
+    parser.add_argument('--wait', type=float, default=10.0,
                         help='seconds to wait for the readers, and again for their '
                              'acknowledgements')
     parser.add_argument('--node', action='append', default=[], metavar='NAME',
-                        help='also wait until this node reads the topic (sim_node, or fully '
-                             'qualified: /chamber1/sim_node); repeatable')
+                        help='also wait until this node reads the topic: its name (growspace_sim '
+                             "is sim_node's) or fully qualified (/chamber1/growspace_sim); "
+                             'repeatable')
     parser.add_argument('--settle', type=float, metavar='SECONDS',
                         help='publish once the readers stayed the same this long (default: '
                              f'{SETTLE_S} without --node, 0 with it)')
