@@ -5,11 +5,11 @@ Example (the same YAML value as the ``ros2`` command line)::
     python -m growspace_sim.tools.pub light/command growspace_msgs/msg/LightCommand \\
         "{mode: 0, x: 0.3, width: 0.1}"
 
-Waits (up to ``--wait`` seconds, 10 by default) until it is matched with every reader of the topic that the
-ROS graph shows, and with the nodes named by ``--node``; publishes once with the node's command
-QoS (reliable); then waits until every reader acknowledged the message, so that none is lost on
-exit; and says which nodes got it. Waiting for the first reader only lost messages: with
-``growspace-record subscribe`` beside sim_node, the recorder often matched first and sim_node
+Waits (up to ``--wait`` seconds, 10 by default) until it is matched with every reader of the
+topic that the ROS graph shows, and with the nodes named by ``--node``; publishes once with the
+node's command QoS (reliable); then waits until every reader acknowledged the message, so that
+none is lost on exit; and says which nodes got it. Waiting for the first reader only lost
+messages: with ``growspace-record subscribe`` beside sim_node, the recorder often matched first and sim_node
 missed the command. The graph cannot show a reader whose process has not been discovered yet,
 and a running participant may be found only at its next announcement (Fast DDS announces every
 3 s; measured here: the second of two readers matched up to 3.1 s after the first). So without
