@@ -9,13 +9,13 @@ Waits (up to ``--wait`` seconds, 10 by default) until it is matched with every r
 topic that the ROS graph shows, and with the nodes named by ``--node``; publishes once with the
 node's command QoS (reliable); then waits until every reader acknowledged the message, so that
 none is lost on exit; and says which nodes got it. Waiting for the first reader only lost
-messages: with ``growspace-record subscribe`` beside sim_node, the recorder often matched first and sim_node
-missed the command. The graph cannot show a reader whose process has not been discovered yet,
-and a running participant may be found only at its next announcement (Fast DDS announces every
-3 s; measured here: the second of two readers matched up to 3.1 s after the first). So without
-``--node`` it also waits until the readers have stayed the same for ``--settle`` seconds
-(``SETTLE_S``); with ``--node`` it publishes as soon as the named nodes and every reader the
-graph shows are matched.
+messages: with ``growspace-record subscribe`` beside sim_node, the recorder often matched first
+and sim_node missed the command. The graph cannot show a reader whose process has not been
+discovered yet, and a running participant may be found only at its next announcement (Fast DDS
+announces every 3 s; measured here: the second of two readers matched up to 3.1 s after the
+first). So without ``--node`` it also waits until the readers have stayed the same for
+``--settle`` seconds (``SETTLE_S``); with ``--node`` it publishes as soon as the named nodes
+and every reader the graph shows are matched.
 The value is checked against the type before anything starts: a misspelt field, or a value of
 the wrong kind or out of its field's range (``step_id: -1``, ``x: abc``), is one line naming
 the field, the value and what is allowed (exit 2).
