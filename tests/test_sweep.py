@@ -33,6 +33,10 @@ from growspace_sim.sweep import trials as trials_module
 # Not imported here: sweep.connect() must set Ray's environment before ray's first import.
 
 from growspace_sim.tools import evaluate
+
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 if importlib.util.find_spec('ray') is None or importlib.util.find_spec('pandas') is None:
     pytest.skip('ray[tune] is not installed (requirements-sweep.txt)', allow_module_level=True)
 
