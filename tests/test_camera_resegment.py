@@ -39,6 +39,10 @@ PHOTOS = len(EPISODES) * (STEPS + 1)
 CAMERA = ('camera/image_raw', 'plant/state', 'camera/measurement', 'step_result')
 
 
+# Most tests read the module's rig recording, made in about 10 s: none in the quick tier.
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory):
     folder = tmp_path_factory.mktemp('rig')
@@ -72,7 +76,6 @@ def decoded(path, rel):
     return [m.decode() for m in read(path)[0] if m.topic == f'/growspace/{rel}']
 
 
-@pytest.mark.slow
 def test_the_recorded_settings_give_the_recorded_measurements(bags, tmp_path, capsys):
     good, _ = bags
     out = tmp_path / 'same.mcap'
@@ -102,7 +105,6 @@ def test_a_bad_threshold_after_a_week_is_undone(bags, tmp_path, capsys):
     assert_same_messages(good, out)
 
 
-@pytest.mark.slow
 def test_a_raised_threshold_shrinks_the_plants_and_changes_the_rewards(bags, tmp_path):
     good, bad = bags
     out = tmp_path / 'raised.mcap'
@@ -126,7 +128,6 @@ def test_a_raised_threshold_shrinks_the_plants_and_changes_the_rewards(bags, tmp
     assert_same_messages(bad, none)
 
 
-@pytest.mark.slow
 def test_settings_come_from_a_params_file_and_a_resegmented_recording(bags, tmp_path, capsys):
     good, _ = bags
     params = tmp_path / 'camera.yaml'
@@ -209,7 +210,6 @@ def rewritten_configs(src, dst, change):
     return dst
 
 
-@pytest.mark.slow
 def test_an_unseeded_episode_after_a_refused_reset_is_measured_with_its_recorded_target(
         tmp_path, capsys):
     # The gantry refused reset 2: no chamber/config for it, and nothing changed. Reset 3
@@ -246,7 +246,6 @@ def test_an_unseeded_episode_after_a_refused_reset_is_measured_with_its_recorded
                for r in results[STEPS + 1:])
 
 
-@pytest.mark.slow
 def test_a_shape_recording_is_measured_again_against_its_recorded_digit(tmp_path, capsys):
     rig = rig_recording(tmp_path / 'shape.mcap', [7, None], 1, challenge='shape')
     masks = [json.loads(c.data)['target']['mask'] for c in decoded(rig, 'chamber/config')]
@@ -275,7 +274,6 @@ def test_a_recorded_target_that_cannot_be_read_leaves_its_episode_unmeasured(bag
                and '"x": "far"' in r.info for r in results[STEPS + 1:])
 
 
-@pytest.mark.slow
 def test_a_damaged_recording_is_read_around_and_a_cut_one_sent_to_recover(tmp_path, capsys):
     # One message per chunk: a photo's chunk holds nothing else, whatever the photos' sizes.
     small = rig_recording(tmp_path / 'small.mcap', [7], STEPS, chunk_size=1)
@@ -320,7 +318,6 @@ def test_the_steps_of_a_recording_read_back_with_their_context(bags):
     assert photos[0].target.point != photos[-1].target.point
 
 
-@pytest.mark.slow
 def test_export_draws_what_the_camera_saw_on_every_photo(bags, tmp_path, capsys):
     good, bad = bags
     seen = tmp_path / 'seen'
@@ -347,7 +344,6 @@ def test_export_draws_what_the_camera_saw_on_every_photo(bags, tmp_path, capsys)
     assert '--scale 3.0 is not allowed; expected' in capsys.readouterr().err
 
 
-@pytest.mark.slow
 def test_the_documented_lines_run_as_written(bags, tmp_path, monkeypatch, capsys):
     lines = [line for _, line in documented() if line.startswith(
         ('growspace-camera resegment ', 'growspace-camera export '))]
