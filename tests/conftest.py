@@ -30,16 +30,21 @@ def child_env() -> dict:
 
 def pytest_configure(config):
     config.addinivalue_line(
-        'markers', 'slow: long runs (minutes, e.g. learning checks); skipped unless '
-                   'GROWSPACE_RUN_SLOW=1 or selected with -m slow')
+        'markers', 'slow: takes a second or more (ROS processes, sweeps, README runs); run by '
+                   'default and in CI, left out of the quick tier: -m "not slow"')
+    config.addinivalue_line(
+        'markers', 'learning: learning checks (minutes each); skipped unless '
+                   'GROWSPACE_RUN_LEARNING=1 or selected with -m learning')
 
 
 def pytest_collection_modifyitems(config, items):
     import pytest  # noqa: PLC0415
 
-    if os.environ.get('GROWSPACE_RUN_SLOW') == '1' or 'slow' in (config.getoption('-m') or ''):
+    chosen = config.getoption('-m') or ''
+    if os.environ.get('GROWSPACE_RUN_LEARNING') == '1' or (
+            'learning' in chosen and 'not learning' not in chosen):
         return
-    skip = pytest.mark.skip(reason='slow: set GROWSPACE_RUN_SLOW=1 or use -m slow')
+    skip = pytest.mark.skip(reason='learning: set GROWSPACE_RUN_LEARNING=1 or use -m learning')
     for item in items:
-        if 'slow' in item.keywords:
+        if item.get_closest_marker('learning') is not None:
             item.add_marker(skip)

@@ -60,6 +60,7 @@ def test_eval_script_rejects_unknown_challenges():
         evaluate.main(['--episodes', '2', '--challenges', 'growing'])
 
 
+@pytest.mark.slow
 def test_bench_script_prints_a_table_and_restores_the_cpu_set(capsys):
     cpus = os.sched_getaffinity(0)
     assert bench.main(['--episodes', '1', '--repeats', '1', '--challenges', 'control']) == 0
@@ -68,6 +69,7 @@ def test_bench_script_prints_a_table_and_restores_the_cpu_set(capsys):
     assert os.sched_getaffinity(0) == cpus
 
 
+@pytest.mark.slow
 def test_the_readme_evaluation_table_reproduces_exactly(capsys):
     # The README's table is `growspace-eval --episodes 100`, printed by the one evaluation stack.
     readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()

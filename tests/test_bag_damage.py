@@ -196,6 +196,7 @@ def _summary_start(path: Path) -> int:
     return struct.unpack_from('<Q', data, footer + 9)[0]
 
 
+@pytest.mark.slow
 def test_cli_reports_damage_without_a_traceback(intact, tmp_path, capsys):
     chunks = chunks_of(intact)
     index = chunks[len(chunks) // 2]

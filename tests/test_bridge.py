@@ -17,6 +17,9 @@ from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_gym_bridge.process import NodeProcess
 from growspace_sim.envs.env import GrowSpaceEnv
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 NAMESPACE = f'/gs_bridge_test_{secrets.token_hex(3)}'
 EPISODE = 50
 

@@ -25,6 +25,9 @@ from growspace_gym_bridge.errors import BridgeError
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_sim.envs.env import GrowSpaceEnv
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 BRIDGED = 'GrowSpaceROS/Control-Easy-v0'
 LOCAL = 'GrowSpace/Control-Easy-v0'
 

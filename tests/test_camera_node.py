@@ -48,6 +48,7 @@ def capture(transport, sim: Simulation, step: int, step_id: int):
                              f'{wire.CAPTURE}_Response')
 
 
+@pytest.mark.slow
 def test_a_capture_answers_with_the_steps_outputs_stamped_as_asked(tmp_path):
     transport, node = node_on(tmp_path, source='twin', twin_seed=3)
     sim = Simulation(SimConfig(challenge='control', setting='easy'))

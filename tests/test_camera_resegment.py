@@ -39,6 +39,10 @@ PHOTOS = len(EPISODES) * (STEPS + 1)
 CAMERA = ('camera/image_raw', 'plant/state', 'camera/measurement', 'step_result')
 
 
+# Most tests read the module's rig recording, made in about 10 s: none in the quick tier.
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory):
     folder = tmp_path_factory.mktemp('rig')

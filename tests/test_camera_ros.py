@@ -17,6 +17,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+import pytest
+
 from growspace_msgs.msg import LightCommand
 from growspace_msgs.srv import Capture
 from ros_helpers import NodeProcess, TIMEOUT_S
@@ -25,6 +27,9 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.ros.interface import config_json
 from growspace_sim.simulation import Simulation
 
+
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
 
 def camera_executable() -> str:
     return os.path.join(get_package_prefix('growspace_camera'), 'lib', 'growspace_camera',

@@ -260,6 +260,7 @@ def test_hidden_markers_after_a_good_photo_hold_the_fit_and_say_so(chamber, phot
     assert not fresh.ok and fresh.error.code == MARKERS and fresh.reward == 0.0
 
 
+@pytest.mark.slow
 def test_fixed_twin_photos_give_the_simulators_plant_and_tips_within_bounds():
     """Eight seeded twin photos over the four challenges (not timed): the camera's plant
     image against the simulator's, its tips, and where along a branch a tip is put."""

@@ -73,6 +73,7 @@ def test_different_seeds_give_different_episodes(challenge):
     assert a.n_nodes != b.n_nodes or not np.array_equal(a.pos[:a.n_nodes], b.pos[:b.n_nodes])
 
 
+@pytest.mark.slow
 def test_episode_is_reproducible_across_processes():
     code = ('import numpy as np, hashlib\n'
             'from test_core import make, rollout\n'
@@ -395,6 +396,7 @@ def test_bounds_keep_an_episode_on_a_small_machine(field, value, allowed):
 
 
 @pytest.mark.skipif(not sys.platform.startswith('linux'), reason='reads /proc/self/status')
+@pytest.mark.slow
 def test_long_episodes_reset_in_linear_memory():
     """Issue 10: episode_length 20,000 used to need an 11.9 GiB ancestors table. Memory only:
     reset time is the benchmark's business (growspace-bench prints it), not a unit test's.
@@ -425,6 +427,7 @@ def test_config_from_dict_accepts_ros_lists():
     assert cfg.digits == (3, 6) and cfg.resolution == 28
 
 
+@pytest.mark.slow
 def test_core_imports_without_ros_or_opencv():
     code = ('import sys\n'
             'sys.modules["rclpy"] = None\n'

@@ -10,6 +10,9 @@ from growspace_sim import replay
 from growspace_sim.tools import demo
 from bridge_helpers import loopback_domain
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 domain = pytest.fixture(scope='module')(loopback_domain)
 
 

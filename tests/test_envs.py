@@ -68,6 +68,7 @@ def episode_digest(name: str, seed: int) -> str:
     return digest.hexdigest()
 
 
+@pytest.mark.slow
 def test_reset_seed_is_reproducible_bit_for_bit_across_processes():
     names = ['GrowSpace/FindPlant-Hard-v0', 'GrowSpace/Shape-Easy-v0']
     here = [episode_digest(n, 42) for n in names]

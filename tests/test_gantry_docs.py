@@ -23,6 +23,9 @@ from growspace_gantry import calibration
 from growspace_sim.replay.cli import build_parser
 from test_gantry_node import RIG
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / 'README.md', ROOT / 'docs' / 'hardware.md']
 

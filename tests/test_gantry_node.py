@@ -107,6 +107,7 @@ def test_connects_reads_settings_and_starts_with_the_lamp_off(rig: Rig) -> None:
     assert rig.transport.messages('chamber/config')
 
 
+@pytest.mark.slow
 def test_lockstep_episode_follows_the_simulator_light(rig: Rig) -> None:
     """Discrete actions mean the same light as in the simulator; each step is answered once,
     when the machine is Idle at the target, with the reached light."""
@@ -162,6 +163,7 @@ def test_nan_and_out_of_travel_commands_are_never_written(tmp_path) -> None:
         rig.close()
 
 
+@pytest.mark.slow
 def test_a_newer_command_cancels_the_running_jog(rig: Rig) -> None:
     rig.ready()
     rig.node.params = GantryParams(port=rig.grbl.port, mode='realtime')
@@ -175,6 +177,7 @@ def test_a_newer_command_cancels_the_running_jog(rig: Rig) -> None:
     assert rig.grbl.mpos[0] == pytest.approx(-845.0 + 200.0, abs=0.05)
 
 
+@pytest.mark.slow
 def test_watchdog_turns_the_lamp_off_and_holds(tmp_path) -> None:
     rig = Rig(tmp_path, watchdog_s=0.3)
     try:
@@ -194,6 +197,7 @@ def held_then_reset(grbl: GrblEmulator) -> bool:
     return bytes([0x21, 0x18]) in bytes(b for b in grbl.realtime if b != 0x3F)
 
 
+@pytest.mark.slow
 def test_estop_mid_move_stops_and_turns_the_lamp_off(rig: Rig) -> None:
     rig.ready()
     assert rig.command(1, mode=convert.MODE_BEAM, x=0.2, width=0.2).info == ''
@@ -218,6 +222,7 @@ def test_estop_mid_move_stops_and_turns_the_lamp_off(rig: Rig) -> None:
     assert rig.run_until(lambda: held_then_reset(rig.grbl))
 
 
+@pytest.mark.slow
 def test_alarm_mid_episode_fails_the_step_and_only_a_person_unlocks(rig: Rig) -> None:
     rig.ready()
     rig.transport.inject('light/command', types.new(
@@ -239,6 +244,7 @@ def test_alarm_mid_episode_fails_the_step_and_only_a_person_unlocks(rig: Rig) ->
     assert rig.command(3, mode=convert.MODE_BEAM, x=0.5, width=0.2).info == ''
 
 
+@pytest.mark.slow
 def test_unplug_and_replug(rig: Rig) -> None:
     rig.ready()
     assert rig.command(1, mode=convert.MODE_BEAM, x=0.3, width=0.2).info == ''

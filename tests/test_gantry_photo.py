@@ -242,6 +242,7 @@ def camera_rig(tmp_path):
     rig.close()
 
 
+@pytest.mark.slow
 def test_each_step_is_photographed_under_the_photo_light_and_answered_with_the_measurement(
         camera_rig: CameraRig) -> None:
     rig = camera_rig
@@ -295,6 +296,7 @@ def test_each_step_is_photographed_under_the_photo_light_and_answered_with_the_m
     assert rig.asked[-1][0].config == config and json.loads(config)['seed'] is None
 
 
+@pytest.mark.slow
 def test_no_camera_service_answers_unavailable_and_switches_the_light_off(tmp_path) -> None:
     rig = CameraRig(tmp_path, capture_timeout_s=0.3)
     try:
@@ -351,6 +353,7 @@ def test_a_newer_command_abandons_the_photo_and_the_light_goes_off_before_the_mo
         rig.close()
 
 
+@pytest.mark.slow
 def test_a_photo_in_progress_is_not_silence_for_the_watchdog(tmp_path) -> None:
     """The agent waits for the step's answer while the photo light settles: the watchdog
     (0.3 s here) must not take the lamp away from the photo."""

@@ -27,6 +27,9 @@ from growspace_sim.ros.interface import COMMAND_QOS
 from ros_helpers import NodeProcess
 from test_gantry_node import RIG
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 SPEEDUP = 40.0
 
 

@@ -73,6 +73,7 @@ def realtime(tmp_path):
 # --- 1. no stale move ever resumes ------------------------------------------------------------
 
 @pytest.mark.parametrize('mode', ['realtime', 'lockstep'])
+@pytest.mark.slow
 def test_after_a_lost_link_nothing_moves_until_a_new_command(tmp_path, mode) -> None:
     rig = Rig(tmp_path, mode=mode, watchdog_s=60.0)
     try:
@@ -103,6 +104,7 @@ def test_after_a_lost_link_nothing_moves_until_a_new_command(tmp_path, mode) -> 
         rig.close()
 
 
+@pytest.mark.slow
 def test_a_controller_restart_clears_the_target_and_asks_for_the_position(realtime) -> None:
     rig = realtime
     rig.ready()
@@ -125,6 +127,7 @@ def test_a_controller_restart_clears_the_target_and_asks_for_the_position(realti
     assert rig.run_until(lambda: rig.grbl.mpos[0] > x + 49.0 and rig.controller.reached())
 
 
+@pytest.mark.slow
 def test_unlock_never_starts_a_move(realtime) -> None:
     rig = realtime
     rig.ready()
@@ -143,6 +146,7 @@ def test_unlock_never_starts_a_move(realtime) -> None:
 
 # --- 2. jog cancel the way GRBL does -----------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_flood_of_commands_ends_on_the_newest_and_no_superseded_jog_runs_out(tmp_path) -> None:
     """200 commands in 2 s across the chamber: every cancel reaches a running jog, the lamp
     ends on the newest command, and a superseded jog stops within a status period or two."""
@@ -228,6 +232,7 @@ def rig(tmp_path):
 # --- 4. the e-stop is latched by the driver ---------------------------------------------------
 
 @pytest.mark.parametrize('reset_alarm, moving', [(True, True), (False, True), (True, False)])
+@pytest.mark.slow
 def test_the_estop_is_latched_until_a_person_unlocks(tmp_path, reset_alarm, moving) -> None:
     """GRBL came back Idle after 2 of 6 mid-move e-stops and after every idle one: the driver
     refuses every command until gantry/unlock, whatever GRBL reports."""
@@ -286,6 +291,7 @@ def damage_three_ways(every: int) -> Any:
     return damage
 
 
+@pytest.mark.slow
 def test_damaged_status_lines_neither_raise_nor_move_the_machine(tmp_path) -> None:
     rig = Rig(tmp_path, emulator={'damage': damage_three_ways(every=3)})
     try:
@@ -306,6 +312,7 @@ def test_damaged_status_lines_neither_raise_nor_move_the_machine(tmp_path) -> No
 
 # --- 6. the watchdog -----------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_a_long_move_is_not_cut_by_the_watchdog(tmp_path) -> None:
     rig = Rig(tmp_path, mode='realtime', watchdog_s=0.3)
     try:
@@ -322,6 +329,7 @@ def test_a_long_move_is_not_cut_by_the_watchdog(tmp_path) -> None:
         rig.close()
 
 
+@pytest.mark.slow
 def test_refused_commands_do_not_feed_the_watchdog(tmp_path) -> None:
     rig = Rig(tmp_path, mode='realtime', watchdog_s=0.4, cal=load_cal(x={
         'axis': 'X', 'mm_per_m': 1000.0, 'offset_mm': -845.0, 'direction': 1,
@@ -342,6 +350,7 @@ def test_refused_commands_do_not_feed_the_watchdog(tmp_path) -> None:
 
 # --- 7. status says what is true -----------------------------------------------------------------
 
+@pytest.mark.slow
 def test_status_says_what_is_true(tmp_path) -> None:
     rig = Rig(tmp_path, settings={22: 1})  # homing enabled: GRBL powers up in Alarm, no code
     try:

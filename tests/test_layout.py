@@ -128,3 +128,55 @@ def test_the_checker_sees_an_upward_import(tmp_path):
     found = _imports(path, 'growspace_sim.core.chamber')
     assert found == {'growspace_sim.node.chamber_node', 'growspace_sim.tools.demo'}
     assert all(_layer(m) > _layer('growspace_sim.core.chamber') for m in found)
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles of ``graph`` (module -> modules it imports): each strongly connected
+    set of two or more modules, or a module importing itself, sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found = []
+
+    def visit(module: str) -> None:  # Tarjan's algorithm
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for target in sorted(graph.get(module, ())):
+            if target not in index:
+                visit(target)
+                low[module] = min(low[module], low[target])
+            elif target in stack:
+                low[module] = min(low[module], index[target])
+        if low[module] == index[module]:
+            members = []
+            while not members or members[-1] != module:
+                members.append(stack.pop())
+            if len(members) > 1 or module in graph.get(module, ()):
+                found.append(sorted(members))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return sorted(found)
+
+
+def test_no_modules_import_each_other():
+    """Not even inside functions (issue 33: ros/plain.py and ros/types.py did): a circle means
+    neither module can be read, or loaded, without the other."""
+    # A module's own packages are loaded before it in any case (the sweep's cli reads its
+    # package's docstring): importing them closes no circle.
+    graph = {module: {m for m in _imports(path, module) if not module.startswith(m + '.')}
+             for module, path in _modules()}
+    assert _circles(graph) == []
+
+
+def test_the_circle_check_sees_a_circle_through_a_function(tmp_path):
+    # What plain.py and types.py were: one imports the other at the top, the other imports
+    # it back inside a function.
+    (tmp_path / 'types.py').write_text('from growspace_sim.ros import plain\n')
+    (tmp_path / 'plain.py').write_text('def check():\n    from growspace_sim.ros import types\n')
+    graph = {f'growspace_sim.ros.{name}': _imports(tmp_path / f'{name}.py',
+                                                   f'growspace_sim.ros.{name}')
+             for name in ('plain', 'types')}
+    assert _circles(graph) == [['growspace_sim.ros.plain', 'growspace_sim.ros.types']]
+    assert _circles({'a': {'b'}, 'b': set()}) == []

@@ -182,7 +182,7 @@ def test_ppo_trains_on_the_native_vec_env_and_bad_choices_are_refused(tmp_path):
         train.main(['--vec', 'native', '--bridge', '--steps', '10'])
 
 
-@pytest.mark.slow
+@pytest.mark.learning
 def test_ppo_learns_control_hard(tmp_path):
     """About 3 minutes on one core: PPO (case-study settings) beats random on control hard."""
     env_id = 'GrowSpace/Control-Hard-v0'

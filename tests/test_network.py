@@ -22,6 +22,9 @@ import pytest
 
 from ros_helpers import Client, NodeProcess
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 LAN, PEER = 'gs_lan0', 'gs_lan1'
 LAN_ADDRESS = '10.231.0.1'
 

@@ -7,6 +7,8 @@ import random
 
 import numpy as np
 
+import pytest
+
 from growspace_sim.core.config import SimConfig
 from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.node.chamber_node import ChamberNode
@@ -17,6 +19,9 @@ from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.ros.interface import COMMAND_QOS
 from ros_helpers import Client, NodeProcess
+
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
 
 NAMESPACE = '/gs_fuzz'
 

@@ -9,9 +9,14 @@ from __future__ import annotations
 from pathlib import Path
 import subprocess
 
+import pytest
+
 from growspace_sim import replay
 from growspace_sim.ros.interface import TOPICS
 from ros_helpers import Client, NodeProcess
+
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
 
 NAMESPACE = '/gs_recording'
 

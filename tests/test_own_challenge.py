@@ -84,6 +84,7 @@ def test_a_network_reset_may_not_import_a_module() -> None:
         convert.reset_args(msg)
 
 
+@pytest.mark.slow
 def test_own_challenge_runs_in_sim_node_through_the_bridge(own_module: str) -> None:
     from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 

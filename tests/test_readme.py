@@ -28,6 +28,8 @@ RUN = 'run here (this file)'
 WHERE = [
     (r'^\./run\.sh demo$', 'covered: tests/test_demo.py runs the demo, recordings checked'),
     (r'^\./run\.sh test$', 'CI: .ci/run runs it; it is this suite'),
+    (r'^\./run\.sh test ', "pytest's arguments, passed through: tests/test_run_sh.py runs a "
+                           'file, collects the suite and the quick tier through run.sh'),
     (r'^eval "\$\(\./run\.sh env\)"$', RUN),
     (r'^colcon build --symlink-install$', RUN),
     (r'^ros2 ', 'needs ros2cli / ros2 launch, not on PyPI (observed by hand: README, ROS 2)'),
@@ -106,6 +108,7 @@ def test_every_documented_command_is_run_here_or_says_why_not() -> None:
     print('\n'.join(f'{page}: {line}\n    -> {how(line)}' for page, line in lines))
 
 
+@pytest.mark.slow
 def test_the_shell_set_up_runs_the_tools_and_colcon_builds(tmp_path) -> None:
     base = tmp_path / 'ws'
     # The README's `colcon build --symlink-install`, into a scratch build and install base (the
@@ -127,6 +130,7 @@ def _placed(line: str, work: Path) -> str:
     return line.replace('broken.mcap', str(work / 'broken.mcap'))
 
 
+@pytest.mark.slow
 def test_the_recording_tools_run_as_written(tmp_path) -> None:
     shutil.copy(ROOT / SAMPLE, tmp_path / 'run.mcap')
     data = (ROOT / SAMPLE).read_bytes()
@@ -142,6 +146,7 @@ def test_the_recording_tools_run_as_written(tmp_path) -> None:
         assert out.returncode == 0, (line, out.stdout[-2000:], out.stderr[-2000:])
 
 
+@pytest.mark.slow
 def test_the_launch_files_nodes_by_hand_meet_and_answer_the_pub_lines(tmp_path) -> None:
     nodes = [line for _, line in documented() if re.match(r'^(sim_node|view_node) --ros-args',
                                                           line) and how(line) == RUN]
@@ -187,6 +192,7 @@ def test_no_page_names_a_script_or_file_that_is_not_here(page: Path) -> None:
     assert not missing, missing
 
 
+@pytest.mark.slow
 def test_the_camera_lines_run_as_written(tmp_path) -> None:
     # In page order: the sheet, twin photos into shots/, measuring them, then camera_node on the
     # twin and on those photos (started, up for a few seconds, stopped by SIGINT).

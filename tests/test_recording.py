@@ -94,6 +94,7 @@ def recorded(tmp_path_factory):
     return path, rec, returns
 
 
+@pytest.mark.slow
 def test_read_back_with_rosbags_every_field_equal(recorded):
     path, rec, _ = recorded
     got = []
@@ -157,6 +158,7 @@ def test_image_msg_is_foxglove_ready(recorded):
     assert (image.encoding, image.width, image.height, image.step) == ('rgb8', 84, 84, 252)
 
 
+@pytest.mark.slow
 def test_lockstep_full_speed_exactly_one_result_per_step(tmp_path):
     path = tmp_path / 'fast.mcap'
     start = time.perf_counter()
@@ -228,6 +230,7 @@ def _wait_for_size(path: Path, size: int, proc: subprocess.Popen, timeout: float
         time.sleep(0.05)
 
 
+@pytest.mark.slow
 def test_sigterm_mid_episode_finishes_the_file(tmp_path):
     path = tmp_path / 'term.mcap'
     proc = subprocess.Popen(_cli('run', str(path), '--episodes', '100', '--realtime',
@@ -245,6 +248,7 @@ def test_sigterm_mid_episode_finishes_the_file(tmp_path):
     assert resimulate(path).ok
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_complete_chunks_recoverable(tmp_path):
     path, fixed = tmp_path / 'kill.mcap', tmp_path / 'fixed.mcap'
     proc = subprocess.Popen(_cli('run', str(path), '--episodes', '100', '--realtime',
@@ -266,6 +270,7 @@ def test_sigkill_leaves_complete_chunks_recoverable(tmp_path):
         recording.recover(path, fixed)
 
 
+@pytest.mark.slow
 def test_disk_full_mid_run_keeps_the_chamber_running(tmp_path):
     # RLIMIT_FSIZE makes writes past 120 kB fail (EFBIG) as a full disk would (ENOSPC).
     path = tmp_path / 'full.mcap'
@@ -294,6 +299,7 @@ def test_disk_full_mid_run_keeps_the_chamber_running(tmp_path):
     assert resimulate(tmp_path / 'kept.mcap').ok
 
 
+@pytest.mark.slow
 def test_atexit_finishes_an_unclosed_recording(tmp_path):
     path = tmp_path / 'exit.mcap'
     script = (f'from growspace_sim.recording import McapRecorder\n'
@@ -356,6 +362,7 @@ def _no_file_writes() -> None:
     resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
 
 
+@pytest.mark.slow
 def test_disk_full_at_start_leaves_no_empty_file_that_blocks_the_next_start(tmp_path):
     path = tmp_path / 'start.mcap'
     script = (f'from growspace_sim.recording import McapRecorder, RecordingError\n'

@@ -174,6 +174,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                           text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_cli_info_check_and_errors(tmp_path):
     path = tmp_path / 'c.mcap'
     record(path, seeds=(2,))
@@ -204,6 +205,7 @@ def test_bad_bag_paths_are_clear_errors(tmp_path):
         recording.recover(tmp_path / 'missing.mcap', tmp_path / 'out.mcap')
 
 
+@pytest.mark.slow
 def test_play_republishes_every_message_over_ros(tmp_path):
     from growspace_sim.node.rclpy_transport import RclpyTransport
 
@@ -233,6 +235,7 @@ def test_play_republishes_every_message_over_ros(tmp_path):
     assert len(received) == len(recorded)
 
 
+@pytest.mark.slow
 def test_sample_bags_are_small_and_reproducible():
     bags = sorted(BAGS.glob('*.mcap'))
     if not bags:
@@ -246,6 +249,7 @@ def test_sample_bags_are_small_and_reproducible():
     assert challenges == set(tasks.names())
 
 
+@pytest.mark.slow
 def test_the_sample_bags_are_what_the_script_writes_byte_for_byte(tmp_path):
     # make_sample_bags.py promises the same bytes from the same code: the tracked files must be
     # regenerated (with --force) whenever the recording's messages, channels or metadata change.

@@ -16,6 +16,9 @@ import pytest
 from growspace_sim.replay import Bag, main, read_episodes
 from ros_helpers import NodeProcess
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_hard.mcap'
 
 

@@ -35,6 +35,9 @@ from test_camera_ros import camera_executable
 from test_gantry_node import RIG
 from test_gantry_ros import gantry_executable
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 NAMESPACE = '/gs_test'
 STEPS_OF_A_STEP = ('camera/image_raw', 'plant/state', 'light/state', 'camera/photo',
                    'camera/measurement', 'step_result')

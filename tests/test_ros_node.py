@@ -37,6 +37,9 @@ from growspace_sim.node import params
 from growspace_sim.ros import interface
 from growspace_sim.ros import types
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 NAMESPACE = f'/gs_node_{secrets.token_hex(3)}'
 NODE = 'growspace_sim'
 EPISODE = 10

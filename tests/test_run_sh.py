@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import re
 import shutil
 import subprocess
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -22,6 +25,27 @@ def test_help_exits_0_and_an_unknown_subcommand_2() -> None:
     assert wrong.returncode == 2 and "unknown subcommand 'tset'" in wrong.stderr
 
 
+@pytest.mark.slow
+def test_test_passes_pytests_arguments_through() -> None:
+    """A file runs alone; no path runs the whole suite (as CI's ./run.sh test does); -m
+    "not slow" the quick tier. (run.sh used to add tests/ to whatever it was given.)"""
+    one = _run(['test', 'tests/test_layout.py', '-vv', '-p', 'no:cacheprovider'], ROOT)
+    ran = re.findall(r'^(\S+)::\S+ PASSED', one.stdout, re.M)
+    assert one.returncode == 0 and ran and set(ran) == {'tests/test_layout.py'}, one.stdout
+    collected = {}
+    for tier, args in (('all', []), ('tests', ['tests']), ('quick', ['-m', 'not slow'])):
+        out = _run(['test', '--collect-only', '-p', 'no:cacheprovider', *args], ROOT)
+        assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+        collected[tier] = set(re.findall(r'^(tests/\S+::\S+)$', out.stdout, re.M))
+    assert collected['all'] == collected['tests'] and len(collected['all']) > 500
+    assert collected['quick'] < collected['all']
+    assert 'tests/test_run_sh.py::test_test_passes_pytests_arguments_through' \
+        not in collected['quick']
+    assert 'tests/test_run_sh.py::test_help_exits_0_and_an_unknown_subcommand_2' \
+        in collected['quick']
+
+
+@pytest.mark.slow
 def test_a_set_up_without_a_package_index_says_so_and_leaves_no_half_venv(tmp_path) -> None:
     # A copy of what set-up reads, pointed at an index that refuses at once (loopback port 9).
     for name in ['run.sh', *(p.name for p in ROOT.glob('requirements*.txt'))]:

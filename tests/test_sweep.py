@@ -33,6 +33,10 @@ from growspace_sim.sweep import trials as trials_module
 # Not imported here: sweep.connect() must set Ray's environment before ray's first import.
 
 from growspace_sim.tools import evaluate
+
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 if importlib.util.find_spec('ray') is None or importlib.util.find_spec('pandas') is None:
     pytest.skip('ray[tune] is not installed (requirements-sweep.txt)', allow_module_level=True)
 
@@ -331,6 +335,22 @@ def test_a_token_cluster_from_ray_start_runs_trials_without_the_workspace(tmp_pa
         [experiment] = (tmp_path / 'storage').iterdir()  # Tune's state, in --storage
         assert list(experiment.glob('experiment_state-*.json'))
         assert (experiment / 'oracle-control-easy-s0').is_dir()
+        # Without the token, or with another: one line, and no Ray retries (about 20 s of
+        # warnings, a traceback without a token, before sweep.cluster).
+        stranger = tmp_path / 'stranger'
+        (stranger / '.ray').mkdir(parents=True)
+        for token, said in ((None, 'this machine has no Ray token for the cluster'),
+                            ('not-the-heads-token', "refused this machine's token")):
+            if token:
+                (stranger / '.ray' / 'auth_token').write_text(token)
+            refused = subprocess.run(
+                [sys.executable, '-m', 'growspace_sim.sweep', '--agents', 'oracle', '--envs',
+                 'GrowSpace/Control-Easy-v0', '--out', str(tmp_path / 'out2'), '--quiet',
+                 '--address', f'127.0.0.1:{port}'], env=dict(driver_env, HOME=str(stranger)),
+                capture_output=True, text=True, timeout=300)
+            assert refused.returncode == 1, refused.stderr[-3000:]
+            assert refused.stderr.count('\n') == 1 and said in refused.stderr, refused.stderr
+            assert refused.stderr.startswith('growspace-sweep: error: '), refused.stderr
     finally:
         head.terminate()  # `ray start --block` stops its node's processes on SIGTERM
         with contextlib.suppress(subprocess.TimeoutExpired):
@@ -342,6 +362,34 @@ def test_a_token_cluster_from_ray_start_runs_trials_without_the_workspace(tmp_pa
         _stop_group(head.pid)
         temp_dir.cleanup()
     assert left == [], 'Ray processes outlived ray start --block'
+
+
+def test_the_token_is_looked_for_where_ray_looks(tmp_path, monkeypatch):
+    """Ray's documented order: RAY_AUTH_TOKEN, else the file RAY_AUTH_TOKEN_PATH names (and
+    no other), else ~/.ray/auth_token."""
+    from growspace_sim.sweep import cluster  # noqa: PLC0415
+
+    monkeypatch.setenv('HOME', str(tmp_path))
+    for name in ('RAY_AUTH_TOKEN', 'RAY_AUTH_TOKEN_PATH'):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv('RAY_AUTH_MODE', 'token')
+    assert cluster.token_source() is None
+    with pytest.raises(ConnectionError, match='^RAY_AUTH_MODE=token but this machine has no Ray '
+                                              'token for the cluster at h:1: copy'):
+        cluster.check_token('h:1')
+    (tmp_path / '.ray').mkdir()
+    (tmp_path / '.ray' / 'auth_token').write_text('abc\n')
+    assert cluster.token_source() == str(tmp_path / '.ray' / 'auth_token')
+    empty = tmp_path / 'empty'
+    empty.write_text('')
+    monkeypatch.setenv('RAY_AUTH_TOKEN_PATH', str(empty))
+    with pytest.raises(ConnectionError, match=f'^RAY_AUTH_TOKEN_PATH={empty} is empty'):
+        cluster.check_token('h:1')
+    monkeypatch.setenv('RAY_AUTH_TOKEN', 'xyz')
+    assert cluster.token_source() == 'RAY_AUTH_TOKEN'
+    monkeypatch.setenv('RAY_AUTH_MODE', 'disabled')
+    monkeypatch.setenv('RAY_AUTH_TOKEN_PATH', str(tmp_path / 'missing'))
+    cluster.check_token('h:1')  # no token mode: nothing to check
 
 
 def _finished(out: Path) -> dict[str, list[dict]]:

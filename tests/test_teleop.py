@@ -24,6 +24,9 @@ from growspace_sim.tools.teleop import QUIT, RESET, Teleop, key_to_command
 from ros_helpers import Client, NodeProcess
 
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
+
 @pytest.mark.parametrize(('key', 'spot', 'name'), [
     (curses.KEY_LEFT, False, 'left'), (curses.KEY_RIGHT, False, 'right'),
     (ord('+'), False, 'wider'), ('=', False, 'wider'), ('-', False, 'narrower'),

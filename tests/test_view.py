@@ -268,6 +268,7 @@ def test_readme_pictures_show_what_the_view_sends() -> None:
 
 
 # ----------------------------------------------------------------------------- export --view
+@pytest.mark.slow
 def test_export_view_adds_markers_and_images_to_a_copy(tmp_path: Any) -> None:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory

@@ -25,6 +25,8 @@ from growspace_sim.ros import types
 from growspace_sim.simulation import Simulation
 from growspace_sim.view import markers
 
+# Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
+pytestmark = pytest.mark.slow
 
 
 # ----------------------------------------------------------------------------- over ROS

@@ -84,6 +84,7 @@ def test_every_interface_parses_with_rosbags() -> None:
         assert parsed[f'growspace_msgs/msg/{short}'][1], f'{name} has no fields'
 
 
+@pytest.mark.slow
 def test_the_loopback_rule_applies_outside_a_sourced_workspace() -> None:
     # The tests' conftest confines ROS to loopback first thing; with no AMENT_PREFIX_PATH
     # (a plain `PYTHONPATH=src/growspace_sim pytest`) ament's index cannot be searched.

@@ -275,6 +275,10 @@ class RclpyTransport:
         endpoint = self._subscriptions.get(self.resolve(topic))
         return endpoint is not None and endpoint.get_publisher_count() > 0
 
+    def matched_count(self, topic: str) -> int:
+        """How many subscriptions our publisher on ``topic`` is matched with (DDS matching)."""
+        return self._publishers[self.resolve(topic)].get_subscription_count()
+
     def serve(self, srv_typename: str, name: str, handler: ServiceHandler) -> bool:
         from rclpy.serialization import deserialize_message
 
@@ -323,12 +327,19 @@ class RclpyTransport:
     def now_ns(self) -> int:
         return time.time_ns()
 
-    def flush(self, timeout_s: float = 1.0) -> None:
-        """Wait until reliable readers acknowledged what we published (before exiting)."""
+    def flush(self, timeout_s: float = 1.0) -> bool:
+        """Wait until reliable readers acknowledged what we published (before exiting).
+
+        Returns:
+            True if every matched reliable reader acknowledged everything within ``timeout_s``
+            per publisher (best-effort publishers count as acknowledged).
+        """
         from rclpy.duration import Duration
 
+        acked = True
         for pub in self._publishers.values():
-            pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9)))
+            acked &= pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9)))
+        return acked
 
     def close(self) -> None:
         """Stop the executor, destroy the node, then shut the context down. Idempotent.

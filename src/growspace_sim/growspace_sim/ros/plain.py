@@ -12,6 +12,7 @@ from numbers import Integral, Real
 from typing import Any
 
 from rosbags.typesys.base import Nodetype
+from rosbags.typesys.store import Typestore
 
 from growspace_sim.core.errors import echo
 
@@ -46,13 +47,15 @@ def _base_problem(base: str, value: Any) -> str | None:
     return None if ok else f'a number ({base}{", |x| <= 3.4e38" if base == "float32" else ""})'
 
 
-def check(typename: str, value: Any, path: str = '') -> None:
+def check(typestore: Typestore, typename: str, value: Any, path: str = '') -> None:
     """Check plain values (nested dicts and lists) against the fields of ``typename``.
 
     Fields left out are fine (they get defaults); unknown field names are left to the message
     builder, which lists the type's fields.
 
     Args:
+        typestore: the types (``types.typestore()``); passed in, so this module needs none of
+            ``types``, which builds messages with it.
         typename: e.g. ``growspace_msgs/msg/LightCommand``.
         value: the field values, nested messages as dicts.
         path: the dotted name of this message in an outer one ('' at the top).
@@ -62,21 +65,19 @@ def check(typename: str, value: Any, path: str = '') -> None:
             allowed, e.g. ``step_id = -1 is not allowed; expected an integer in
             [0, 18446744073709551615] (uint64).``
     """
-    from growspace_sim.ros.types import typestore
-
     if not isinstance(value, dict):
         raise ValueError(f'{path or typename} = {echo(value)} is not allowed; expected a '
                          f'mapping of the fields of {typename}.')
-    fields = dict(typestore().fielddefs[typename][1])
+    fields = dict(typestore.fielddefs[typename][1])
     for name, item in value.items():
         if name in fields:
-            _check_field(f'{path}.{name}' if path else name, fields[name], item)
+            _check_field(typestore, f'{path}.{name}' if path else name, fields[name], item)
 
 
-def _check_field(path: str, desc: tuple, item: Any) -> None:
+def _check_field(typestore: Typestore, path: str, desc: tuple, item: Any) -> None:
     kind, arg = desc
     if kind == Nodetype.NAME:
-        check(arg, item, path)
+        check(typestore, arg, item, path)
     elif kind == Nodetype.BASE:
         allowed = _base_problem(arg[0], item)
         if allowed is not None:
@@ -85,4 +86,4 @@ def _check_field(path: str, desc: tuple, item: Any) -> None:
         if isinstance(item, (str, bytes, dict)) or not hasattr(item, '__len__'):
             raise ValueError(f'{path} = {echo(item)} is not allowed; expected a list.')
         for i, sub in enumerate(item):
-            _check_field(f'{path}[{i}]', arg[0], sub)
+            _check_field(typestore, f'{path}[{i}]', arg[0], sub)

@@ -24,6 +24,8 @@ from rosbags.typesys import get_typestore, get_types_from_msg, Stores
 from rosbags.typesys.base import Nodetype
 from rosbags.typesys.store import Typestore
 
+from growspace_sim.ros import plain
+
 PACKAGE = 'growspace_msgs'
 MSGS_DIR_ENV = 'GROWSPACE_MSGS_DIR'
 
@@ -267,10 +269,8 @@ def from_plain(typename: str, value: dict[str, Any]) -> Any:
         ValueError: A value does not fit its field (``plain.check``: names the field, the
             value and what is allowed) or a fixed-size array has the wrong length.
     """
-    from growspace_sim.ros import plain  # it reads this module's typestore
-
     if typename in typestore().fielddefs:
-        plain.check(typename, value)
+        plain.check(typestore(), typename, value)
 
     def build(desc: tuple, item: Any) -> Any:
         kind, arg = desc

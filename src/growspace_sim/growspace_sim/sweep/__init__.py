@@ -43,8 +43,8 @@ Run the same command again after an interruption: finished trials are kept, the 
 (``--retry-errored`` also reruns failed ones).
 
 Modules: ``spec`` (the spec and its validation), ``trials`` (Ray Tune: running, resuming,
-staying on loopback), ``report`` (table and figures) and ``cli`` (``growspace-sweep``, also
-``python -m growspace_sim.sweep``).
+staying on loopback), ``cluster`` (joining a cluster: its token checked first), ``report``
+(table and figures) and ``cli`` (``growspace-sweep``, also ``python -m growspace_sim.sweep``).
 """
 
 from growspace_sim.sweep.cli import main

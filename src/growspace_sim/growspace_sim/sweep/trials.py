@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
 import contextlib
 import csv
 import json
@@ -23,6 +22,7 @@ import numpy as np
 
 from growspace_sim.agents import evaluation
 from growspace_sim.learn import evaluate_policies
+from growspace_sim.sweep import cluster
 from growspace_sim.sweep.spec import BASELINES, Spec, SpecError, Trial
 
 
@@ -124,7 +124,8 @@ def connect(address: str | None, workers: int | None) -> Any | None:
             copies to each node (``py_modules``); its nodes need the same venv, not this
             workspace. A cluster with token authentication needs ``RAY_AUTH_MODE=token`` and
             its token here (``~/.ray/auth_token``, ``RAY_AUTH_TOKEN_PATH`` or
-            ``RAY_AUTH_TOKEN``).
+            ``RAY_AUTH_TOKEN``); without one, or with one the cluster refuses, this fails at
+            once (``sweep.cluster``).
         workers: CPUs of the local instance (default: all cores); unused for a cluster.
 
     Returns:
@@ -133,14 +134,16 @@ def connect(address: str | None, workers: int | None) -> Any | None:
         initialised in this process (then it is not this caller's to disconnect).
 
     Raises:
-        ConnectionError: Nothing answers at the cluster's address, or Ray could not join it
-            (e.g. it refused this machine's token).
+        ConnectionError: Nothing answers at the cluster's address, this machine has no token
+            for a token cluster, or Ray could not join it (e.g. it refused the token); the
+            message is one line.
         RuntimeError: A local instance would not stay on loopback (``ray`` was imported
             before this call; see the comment below).
     """
     os.environ['RAY_USAGE_STATS_ENABLED'] = '0'  # Ray's usage report would leave the machine
     address = address or os.environ.get('RAY_ADDRESS')
     if address:
+        cluster.check_token(address)
         _check_answers(address)
     else:
         # On Linux, Ray 2.60 swaps a loopback node address for the machine's outward one (and
@@ -156,14 +159,14 @@ def connect(address: str | None, workers: int | None) -> Any | None:
         # The trials run this package on every node: ship the driver's copy (Ray caches it by
         # content) so that the other machines need only the venv, and run the same code.
         import growspace_sim  # noqa: PLC0415
-        return ray.init(address=address, log_to_driver=False,
-                        runtime_env={'py_modules': [growspace_sim],
-                                     'excludes': ['__pycache__']})
+        return cluster.join(address, lambda: ray.init(
+            address=address, log_to_driver=False,
+            runtime_env={'py_modules': [growspace_sim], 'excludes': ['__pycache__']}))
     if ray.util.get_node_ip_address() != LOOPBACK:
         raise RuntimeError('ray was imported before growspace_sim.sweep.connect(), so a local '
                            'Ray would not stay on 127.0.0.1; set '
                            'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 before importing ray.')
-    with _environ(LOCAL_ONLY_ENV):
+    with cluster.environ(LOCAL_ONLY_ENV):
         return ray.init(address='local', num_cpus=workers, include_dashboard=False,
                         _node_ip_address=LOOPBACK, _temp_dir=private_temp_dir(),
                         log_to_driver=False)
@@ -207,21 +210,6 @@ def private_temp_dir() -> str:
     if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid() or info.st_mode & 0o077:
         parent = Path(tempfile.mkdtemp(prefix='growspace-ray-'))
     return str(parent / 'ray')
-
-
-@contextlib.contextmanager
-def _environ(values: Mapping[str, str]) -> Iterator[None]:
-    """Set environment variables for the processes started inside the block."""
-    saved = {name: os.environ.get(name) for name in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
 
 
 def run_sweep(spec: Spec, out: str | os.PathLike, storage: str | None = None,
