@@ -130,6 +130,12 @@ class GrblController:
         """A move is under way: a jog on the machine, or one about to be sent."""
         return self.motion.busy
 
+    @property
+    def halting(self) -> bool:
+        """Stopping a motion the driver did not start (``Run``/``Hold``: feed hold, then a
+        soft reset once stopped)."""
+        return self.motion.halting
+
     def reached(self) -> bool:
         """Idle at the current target (two reports agree), nothing in flight."""
         m = self.motion
@@ -386,9 +392,15 @@ class GrblController:
                           f'gantry/home).')
         elif status.state != 'Alarm' and self.alarm is not None:
             self.alarm = None  # left by $X or $H
-        problem = self.motion.reported(status.state, self.position, self._settled)
+        halting = self.motion.halting
+        problem = self.motion.reported(status.state, self.position, self._settled,
+                                       status.substate)
         if problem:
-            self._fail(problem)
+            # An uncommanded motion ran the light where nobody asked, and its stop depends on
+            # timing (a reset before Hold:0 is ALARM:3): re-establish the position first.
+            self._fail(problem, position_lost=self.motion.halting and not halting)
+            if self.motion.halting:
+                self.log.warn('grbl:uncommanded', f'gantry: {problem}; lamp off')
 
     def _send_due(self) -> None:
         """Write what the motion asks for (a jog cancel, a lamp line, the next jog)."""
@@ -396,7 +408,12 @@ class GrblController:
             return
         due = self.motion.due(self.status.state, self.position, self._settled,
                               self.counter.pending)
-        if isinstance(due, bytes):
+        if due == grbl.SOFT_RESET:
+            self.log.warn('grbl:halt', 'gantry: the uncommanded motion stopped (Hold:0): soft '
+                          'reset, which flushes the rest of it and switches the lamp off')
+            if self._write(due):
+                self._after_reset(self._now)
+        elif isinstance(due, bytes):
             self._write(due)
         elif due is not None:
             self._send_line(due)
