@@ -532,7 +532,7 @@ def test_a_fault_stops_the_machine_in_every_motion_state(tmp_path, mode, state) 
                 rig.grbl.press_feed_hold()
         assert rig.run_until(lambda: rig.controller.lamp_s == 0.0)
         assert rig.run_until(lambda: rig.grbl.state == 'Idle' and rig.grbl.spindle[0] == 'M5'
-                             and rig.controller.ready and not rig.controller.halting,
+                             and rig.controller.ready and not rig.controller.motion.halting,
                              timeout=10.0), (rig.grbl.state, rig.transport.warnings[-3:])
         assert rig.grbl.jogs[-1]['outcome'] == ('cancelled' if state == 'Jog' else 'reset')
         assert realtime_bytes(rig.grbl, mark) == {'Jog': [0x85], 'Run': [0x21, 0x18],

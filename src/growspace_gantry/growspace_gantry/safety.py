@@ -79,7 +79,7 @@ class Safety:
             return c.failure or f'the controller is {c.phase}'
         if c.alarm is not None:
             return f'{grbl.alarm_text(c.alarm)}; a person must call gantry/unlock or gantry/home'
-        if c.halting:
+        if c.motion.halting:
             return f'stopping a motion the driver did not start (controller: {c.state}): feed ' \
                 f'hold, then a soft reset once stopped'
         if c.status is None or c.position is None:
