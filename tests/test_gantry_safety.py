@@ -347,26 +347,23 @@ def test_status_says_what_is_true(tmp_path) -> None:
     try:
         assert rig.run_until(lambda: rig.controller.status is not None
                              and rig.controller.status.state == 'Alarm')
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: 'alarm' in status(rig)[1])  # the status that says so
         level, message, values = status(rig)
         assert level == 2 and 'alarm (no code)' in message and 'ALARM:0' not in message
         assert values['lamp_s'] == '0'
         assert call(rig, 'gantry/unlock').success
         assert rig.run_until(lambda: rig.controller.ready and rig.grbl.state == 'Idle')
-        settle(rig, 0.1)
         assert rig.command(1, mode=convert.MODE_BEAM, x=0.5, width=0.2).info == ''
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: status(rig)[2]['lamp_s'] == '1000')
         level, message, values = status(rig)
         assert (level, values['lamp_s'], values['last_failure']) == (0, '1000', '')
         rig.grbl.trigger_alarm(3)
-        assert rig.run_until(lambda: rig.controller.alarm == 3)
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: rig.controller.alarm == 3 and status(rig)[0] == 2)
         level, message, values = status(rig)
         assert level == 2 and message.count('ALARM:3') == 1
         rig.grbl.unplug()
         assert rig.run_until(lambda: rig.controller.phase == 'offline')
-        settle(rig, 0.1)
-        assert status(rig)[2]['lamp_s'] == 'unknown'
+        assert rig.run_until(lambda: status(rig)[2]['lamp_s'] == 'unknown')
         for s in (m.status[0] for m in rig.transport.messages('gantry/status')):
             values = {kv.key: kv.value for kv in s.values}
             if s.level == 0:  # OK only with a report in hand and no alarm
@@ -386,8 +383,8 @@ def test_suppressed_warnings_are_counted_in_the_log(tmp_path) -> None:
         refused = [w for w in rig.transport.warnings if 'outside its travel' in w]
         assert len(refused) == 1  # throttled
         rig.transport.time_s += 10.0  # the throttle period passes, no fifth command
-        settle(rig, 0.05)
-        assert any('3 similar warnings suppressed' in w for w in rig.transport.warnings), \
+        assert rig.run_until(lambda: any('3 similar warnings suppressed' in w
+                                         for w in rig.transport.warnings)), \
             rig.transport.warnings
     finally:
         rig.close()
