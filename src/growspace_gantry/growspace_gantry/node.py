@@ -395,8 +395,8 @@ class GantryNode:
                 self._channels[t.key] = self.recorder.add_channel(
                     self.transport.resolve(t.name), t.typename, t.qos)
             self.recorder.add_metadata(METADATA_NAME, metadata)
-            self.recorder.add_metadata(GANTRY_METADATA, {
-                'version': __version__, 'port': self.params.port,
+            self.recorder.add_metadata(GANTRY_METADATA, {  # with each step's growth rule
+                'version': __version__, 'port': self.params.port, **self.params.step_time(),
                 'calibration': json.dumps(dataclasses.asdict(self.cal), sort_keys=True)})
         except Exception as e:  # noqa: BLE001 - recording never stops the machine's safety
             self._recording_failed(e)

@@ -73,6 +73,12 @@ class GantryParams:
         except ValueError as e:
             raise ParamError(str(e)) from None
 
+    def step_time(self) -> dict[str, str]:
+        """What decides a step's time on the rig, for the recording's metadata: a replay or a
+        resumed run recomputes each step's growth period from it (``Photoperiod``)."""
+        return {name: str(getattr(self, name)) for name in (
+            'mode', 'growth_s', 'lights_on', 'lights_off', 'utc_offset_h')}
+
     @property
     def photoperiod(self) -> Photoperiod:
         """The lights-on window (``lights_on``, ``lights_off``, ``utc_offset_h``)."""
