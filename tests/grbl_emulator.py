@@ -39,6 +39,11 @@ What it models:
   the steppers only in a motion state or while a hold decelerates). The firmware may report
   ``Idle`` for the instant between the two; the hook makes the switch at once;
 - the feed hold input pin (``press_feed_hold``: GRBL's control pin, the same as ``!``);
+- a line that changes the spindle or coolant state (``M3``/``M4``/``M5``, a new ``S`` while
+  on, ``M8``/``M9``) during a cycle waits for the planner to empty before it acts and is
+  answered (gcode.c's ``spindle_sync``/``coolant_sync`` call ``protocol_buffer_synchronize``),
+  and every line behind it waits too: ``M5`` does not switch the lamp off in ``Run``, nor
+  while a hold keeps the rest of the move planned;
 - faults: ``trigger_alarm``, ``unplug``/``replug``, ``restart`` (power glitch: banner, position
   0), ``reject_next`` (error codes), ``damage`` (a function that may rewrite a status line).
 """
@@ -454,6 +459,9 @@ class GrblEmulator(GrblLines):
             end = next((i for i, b in enumerate(self._rx) if b in (0x0A, 0x0D)), None)
             if end is None or time.monotonic() < self._parsed_at[0]:
                 return  # GRBL takes a few ms to parse and plan a line
+            if self._blocks and self.state != 'Jog' and self._synced(
+                    bytes(self._rx[:end]).decode('ascii', 'replace').replace(' ', '').upper()):
+                return  # spindle_sync / coolant_sync: until the planner is empty
             self._parsed_at.pop(0)
             raw = bytes(self._rx[:end])
             del self._rx[:end + 1]

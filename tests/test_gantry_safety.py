@@ -439,10 +439,11 @@ def realtime_bytes(grbl, mark: int) -> list[int]:
 
 
 def test_the_emulator_restarts_a_starved_jog_as_a_cycle_that_only_a_hold_stops(tmp_path) -> None:
-    """GRBL 1.1 (protocol.c, stepper.c, motion_control.c): a starved segment buffer during a jog
-    ends in ``Run`` (auto cycle start); a jog cancel is then ignored; a feed hold decelerates
-    (``Hold:1``) and stops (``Hold:0``); a reset at ``Hold:0`` keeps the position, no alarm; a
-    reset while the hold decelerates is ``ALARM:3``."""
+    """GRBL 1.1 (protocol.c, stepper.c, motion_control.c, gcode.c): a starved segment buffer
+    during a jog ends in ``Run`` (auto cycle start); a jog cancel is then ignored; ``M5`` waits
+    for the planner to empty; a feed hold decelerates (``Hold:1``) and stops (``Hold:0``); a
+    reset at ``Hold:0`` keeps the position, no alarm, and switches the spindle off; a reset
+    while the hold decelerates is ``ALARM:3``."""
     from grbl_emulator import GrblEmulator
     from growspace_gantry.link import SerialLink
 
@@ -478,6 +479,8 @@ def test_the_emulator_restarts_a_starved_jog_as_a_cycle_that_only_a_hold_stops(t
                 assert state() == 'Run' and grbl.cycles_from_jogs
                 link.write(b'\x85')
                 assert state() == 'Run' and grbl.cancels[-1] != 'cancelled'
+                answers = len([x for x in seen if x == 'ok'])
+                link.write(b'M5\n')  # spindle_sync: waits for the planner to empty
                 link.write(b'!')
                 if reset_at == 'Hold:1':
                     assert state() == 'Hold:1'
@@ -488,9 +491,11 @@ def test_the_emulator_restarts_a_starved_jog_as_a_cycle_that_only_a_hold_stops(t
                 while (now := state()) != 'Hold:0':
                     assert now == 'Hold:1'
                 held = grbl.mpos
-                assert held[0] > -800.0 and grbl.spindle == ('M3', 500.0)
+                assert held[0] > -800.0 and grbl.spindle == ('M3', 500.0)  # M5 still waits
+                assert len([x for x in seen if x == 'ok']) == answers
                 link.write(b'\x18')
                 until(lambda x: x.startswith('Grbl '))
+                assert len([x for x in seen if x == 'ok']) == answers  # flushed, never run
                 assert state() == 'Idle' and grbl.mpos == held and grbl.spindle[0] == 'M5'
                 assert grbl.jogs[-1]['outcome'] == 'reset'
             assert not any(line.startswith('ALARM') for line in seen[:-1])
