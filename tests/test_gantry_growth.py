@@ -151,3 +151,26 @@ def test_the_lamp_follows_the_photoperiod_in_realtime(tmp_path) -> None:
         assert status(rig)[2]['lights'] == 'off (night)'
     finally:
         rig.close()
+
+
+def test_step_time_on_a_clock_of_its_own() -> None:
+    """The growth period's rules without a machine: none for a reset or growth_s 0; it ends
+    when the lit time is done; the phase and time left say where it is."""
+    from growspace_gantry.growth import GROWING, NIGHT as NIGHT_PHASE, StepTime
+    from growspace_sim.core.photoperiod import Photoperiod
+
+    now = [NIGHT - 1800.0]  # 22:30: night
+    grow = StepTime(3600.0, Photoperiod('06:00', '22:00'), lambda: now[0])
+    assert not StepTime(0.0, Photoperiod(), lambda: now[0]).start(1, 1)
+    assert not grow.start(1, 0) and not grow.busy  # a reset grows nothing
+    assert grow.lamp_s(1000.0) == 0.0 and grow.phase() == ''
+    assert grow.start(1, 4) and grow.busy and grow.phase() == NIGHT_PHASE
+    assert grow.left() == pytest.approx((3600.0, 7.5 * 3600.0 + 3600.0))
+    now[0] = MORNING + 1800.0
+    assert grow.phase() == GROWING and grow.lamp_s(1000.0) == 1000.0
+    assert grow.left() == pytest.approx((1800.0, 1800.0)) and grow.poll() is None
+    now[0] = MORNING + 3600.0
+    done = grow.poll()
+    assert (done.reset_id, done.step_id, done.end) == (1, 4, MORNING + 3600.0)
+    assert not grow.busy and grow.left() == (0.0, 0.0) and grow.abandon() is None
+    assert grow.start(2, 1) and grow.abandon().step_id == 1 and not grow.busy
