@@ -211,9 +211,32 @@ def refused_jog(h: Harness, rng: np.random.Generator) -> bool:
         and not [x for x in h.moves_after(mark) if x.startswith('$J')] and h.grbl.mpos[0] == x0
 
 
+def cycle_from_jog(hold_button: bool) -> Callable[[Harness, np.random.Generator], bool]:
+    """GRBL restarts the jog as a cycle (a starved segment buffer: Run), with or without a hold
+    button pressed then (Hold); holds: the step failed saying so, the rest of the move never
+    ran (the emulator's jog ends 'reset'), Idle with the lamp off, no alarm, nothing sent after."""
+    def run(h: Harness, rng: np.random.Generator) -> bool:
+        h.place(int(rng.integers(100)))
+        h.grbl.speedup = 10.0  # a move of seconds: the cycle begins mid-move
+        h.send(1, mode=convert.MODE_BEAM, x=far(rng), width=0.2)
+        h.until(lambda: h.grbl.state == 'Jog')
+        mark, began = len(h.grbl.lines), h.grbl.mpos
+        if not h.grbl.starve_segment_buffer():
+            return False
+        if hold_button:
+            h.grbl.press_feed_hold()
+        h.until(lambda: h.grbl.state == 'Idle' and h.grbl.spindle[0] == 'M5' and h.c.ready)
+        h.until(lambda: False, 0.3)
+        Stats.cycle_overrun = max(Stats.cycle_overrun, abs(h.grbl.mpos[0] - began[0]))
+        return (h.grbl.jogs[-1]['outcome'] == 'reset' and h.grbl.state == 'Idle'
+                and h.grbl.spindle[0] == 'M5' and 'went' in h.results()[-1].info
+                and not h.moves_after(mark) and h.c.alarm is None)
+    return run
+
+
 class Stats:
     flood_cancels = flood_late = damaged_lines = 0
-    flood_overrun = 0.0
+    flood_overrun = cycle_overrun = 0.0
 
 
 SCENARIOS = [
@@ -235,15 +258,22 @@ SCENARIOS = [
      'one jog per moving step'),
     ('jog refused (error:15), then "stay"', refused_jog, {}, 'no jog: the light stayed where '
      'the machine was'),
+    ('GRBL restarts a jog as a cycle (Run, a starved segment buffer)', cycle_from_jog(False),
+     {}, 'feed hold, soft reset at Hold:0: the rest of the move never ran, lamp off, no alarm'),
+    ('a jog restarted as a cycle, then a hold button (Hold)', cycle_from_jog(True), {},
+     'soft reset at Hold:0: the rest of the move never ran, lamp off, no alarm'),
 ]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--repeats', type=int, default=10)
+    parser.add_argument('--only', default='', help='run the scenarios whose name holds this')
     args = parser.parse_args()
     rows = []
     for name, scenario, options, what in SCENARIOS:
+        if args.only not in name:
+            continue
         options = dict(options)
         mode = options.pop('mode', 'lockstep')
         held = 0
@@ -263,7 +293,8 @@ def main() -> None:
         print(f'| {name} | {times} | {held} | {what} |')
     print(f'\nflood: {Stats.flood_cancels} jog cancels sent, {Stats.flood_late} crossed their '
           f"jog's end on the wire; longest run of a superseded jog after a newer command: "
-          f'{Stats.flood_overrun:.3f} s. Damaged status lines: {Stats.damaged_lines}.')
+          f'{Stats.flood_overrun:.3f} s. Damaged status lines: {Stats.damaged_lines}. A jog '
+          f'restarted as a cycle ran on at most {Stats.cycle_overrun:.1f} mm.')
 
 
 if __name__ == '__main__':

@@ -29,6 +29,21 @@ What it models:
   (Interface documentation);
   motion in time (``speedup`` times faster than real time, distances unchanged: ``$$`` reports
   the rates and accelerations of that faster machine, so a driver's physics checks hold);
+- a jog that becomes a cycle (``starve_segment_buffer``): when GRBL's main loop falls behind,
+  the stepper interrupt finds its segment buffer empty and stops (stepper.c: ``st_go_idle``,
+  ``EXEC_CYCLE_STOP``); the main loop takes that for the motion's end (protocol.c: a jog that
+  is not being cancelled goes Idle, its block still planned), and its next
+  ``protocol_auto_cycle_start`` finds the block and starts it as a cycle (``STATE_CYCLE``,
+  reported ``Run``). From then on a jog cancel is ignored, a feed hold holds (``Hold:1``, then
+  ``Hold:0``), a reset at ``Hold:0`` keeps the position without an alarm (``mc_reset`` kills
+  the steppers only in a motion state or while a hold decelerates). The firmware may report
+  ``Idle`` for the instant between the two; the hook makes the switch at once;
+- the feed hold input pin (``press_feed_hold``: GRBL's control pin, the same as ``!``);
+- a line that changes the spindle or coolant state (``M3``/``M4``/``M5``, a new ``S`` while
+  on, ``M8``/``M9``) during a cycle waits for the planner to empty before it acts and is
+  answered (gcode.c's ``spindle_sync``/``coolant_sync`` call ``protocol_buffer_synchronize``),
+  and every line behind it waits too: ``M5`` does not switch the lamp off in ``Run``, nor
+  while a hold keeps the rest of the move planned;
 - faults: ``trigger_alarm``, ``unplug``/``replug``, ``restart`` (power glitch: banner, position
   0), ``reject_next`` (error codes), ``damage`` (a function that may rewrite a status line).
 """
@@ -108,6 +123,7 @@ class GrblEmulator(GrblLines):
         self.cancels: list[str] = []  # what each jog cancel met: cancelled, or ignored (early,
         # late, repeat, ignored: see _cancel_outcome)
         self.damaged: list[tuple[str, str]] = []  # (status line, what was sent instead)
+        self.cycles_from_jogs = 0  # jogs restarted as a cycle by a starved segment buffer
         self.reject_next: list[int] = []  # error codes to answer the next lines with (tests)
         self._lock = threading.RLock()
         self._rx = bytearray()
@@ -187,6 +203,30 @@ class GrblEmulator(GrblLines):
                 self._coolant(False)
             self.state = 'Alarm'
             self._send(f'ALARM:{code}\r\n')
+
+    def starve_segment_buffer(self) -> bool:
+        """The main loop fell behind the stepper interrupt during a jog: the jog goes on as a
+        cycle (``Run``), as GRBL 1.1 does (see the module docstring).
+
+        Returns:
+            Whether a jog was running (a jog being cancelled ends as the cancel says instead:
+            protocol.c flushes the planner on ``SUSPEND_JOG_CANCEL``).
+        """
+        with self._lock:
+            self._move()
+            if self.state != 'Jog' or self._stopping is not None or not self._blocks:
+                return False
+            # EXEC_CYCLE_STOP with no jog cancel: 'motion complete', Idle, planner kept; then
+            # protocol_auto_cycle_start: a block is planned, EXEC_CYCLE_START: STATE_CYCLE.
+            self._segment_start, self._from = time.monotonic(), self.mpos
+            self.state = 'Run'
+            self.cycles_from_jogs += 1
+            return True
+
+    def press_feed_hold(self) -> None:
+        """The feed hold input (a button on the machine): what ``!`` does."""
+        with self._lock:
+            self._realtime(0x21)
 
     def unplug(self) -> None:
         with self._lock:
@@ -419,6 +459,9 @@ class GrblEmulator(GrblLines):
             end = next((i for i, b in enumerate(self._rx) if b in (0x0A, 0x0D)), None)
             if end is None or time.monotonic() < self._parsed_at[0]:
                 return  # GRBL takes a few ms to parse and plan a line
+            if self._blocks and self.state != 'Jog' and self._synced(
+                    bytes(self._rx[:end]).decode('ascii', 'replace').replace(' ', '').upper()):
+                return  # spindle_sync / coolant_sync: until the planner is empty
             self._parsed_at.pop(0)
             raw = bytes(self._rx[:end])
             del self._rx[:end + 1]

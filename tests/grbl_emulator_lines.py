@@ -62,6 +62,20 @@ class GrblLines:
             return 9  # G-code locked out during alarm or jog state
         return self._gcode(line)
 
+    def _synced(self, line: str) -> bool:
+        """Whether GRBL waits for the planner to empty before this line (gcode.c: a change
+        of the spindle state, of S while on outside a motion block, or of the coolant)."""
+        words = None if line.startswith('$') else self._words(line)
+        if not words:
+            return False
+        codes = {f'{a}{v:g}' for a, v in words if a == 'M'}
+        mode = next((c for c in ('M3', 'M4', 'M5') if c in codes), self.spindle[0])
+        s = [v for a, v in words if a == 'S']
+        motion = any(a in 'XYZ' for a, _ in words)
+        return (mode != self.spindle[0]
+                or (mode != 'M5' and bool(s) and s[0] != self._programmed_s and not motion)
+                or ('M8' in codes and not self.coolant) or ('M9' in codes and self.coolant))
+
     def _words(self, text: str) -> list[tuple[str, float]] | None:
         words = WORD.findall(text)
         if ''.join(f'{a}{b}' for a, b in words) != text:

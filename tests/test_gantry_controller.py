@@ -118,6 +118,45 @@ def test_a_jog_is_cancelled_only_once_grbl_accepted_it_and_is_jogging() -> None:
     assert s.link.take().replace(b'?', b'') == b'$J=G21G53X-700.000Z-300.000F1000\n'
 
 
+@pytest.mark.parametrize('idle_between', [0, 1, 2])
+def test_a_jog_grbl_restarts_as_a_cycle_is_held_then_reset_once_stopped(idle_between) -> None:
+    """A starved jog goes Run (auto cycle start), maybe through Idle reports on the firmware:
+    never a jog cancel there (ignored outside Jog), a feed hold at each Run report, nothing
+    while the hold decelerates, a soft reset at Hold:0; the fault says the position is lost;
+    never $X."""
+    s = Script()
+    c = s.controller
+    c.goto({'X': -700.0, 'Z': -300.0})
+    c.set_lamp(1000.0)
+    s.poll()
+    assert s.answer_lines() == ['M3 S1000']
+    s.idle()
+    assert b'$J=' in s.link.take()
+    s.feed('ok')
+    s.report('Jog', (-450.0, 0.0, -300.0))
+    s.link.take()
+    for _ in range(idle_between):  # the instant between the starved jog and its cycle
+        s.report('Idle', (-460.0, 0.0, -300.0))
+    s.answer_lines()  # after two Idle reports short of the target: M5 (GRBL would sync it)
+    s.link.take()
+    events = s.report('Run', (-470.0, 0.0, -300.0))
+    assert s.link.take().replace(b'?', b'') == grbl.FEED_HOLD
+    faults = [e for e in events if 'went Run' in e.reason]
+    assert len(faults) == 1 and faults[0].position_lost and c.lamp_s == 0.0
+    assert c.target is None and c.motion.halting and c.busy
+    s.report('Run', (-480.0, 0.0, -300.0))  # the hold not yet acted on: again, harmless
+    assert s.link.take().replace(b'?', b'') == grbl.FEED_HOLD
+    for pos in (-485.0, -487.0):
+        assert not s.report('Hold:1', (pos, 0.0, -300.0))  # decelerating: no new fault
+        assert s.link.take().replace(b'?', b'') == b''
+    s.report('Hold:0', (-488.0, 0.0, -300.0))
+    assert s.link.take().replace(b'?', b'') == grbl.SOFT_RESET and c.phase == 'booting'
+    assert not c.motion.halting
+    s.feed(BANNER)
+    assert s.link.take() == b'$$\n'
+    assert grbl.JOG_CANCEL not in s.link.written and b'$X' not in s.link.written
+
+
 def test_a_jog_that_ends_before_its_cancel_is_not_cancelled() -> None:
     s = Script()
     c = s.controller

@@ -121,11 +121,11 @@ def test_gantry_node_runs_as_written(tmp_path, line) -> None:
                                 stderr=subprocess.STDOUT, text=True)
         try:
             deadline = time.monotonic() + 20.0
-            while '$$' not in grbl.lines and time.monotonic() < deadline \
+            # Ready: the settings read and checked, then the lamp-off line, its first.
+            while 'M5' not in grbl.lines and time.monotonic() < deadline \
                     and proc.poll() is None:
                 time.sleep(0.05)
-            assert '$$' in grbl.lines, proc.poll()
-            time.sleep(0.3)
+            assert '$$' in grbl.lines and 'M5' in grbl.lines, proc.poll()
         finally:
             proc.send_signal(signal.SIGINT)
             out = proc.communicate(timeout=20)[0]

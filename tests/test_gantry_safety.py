@@ -17,7 +17,7 @@ import pytest
 
 from grbl_emulator import random_damage
 from growspace_sim.ros import convert, types
-from test_gantry_node import jogs, load_cal, Rig
+from test_gantry_node import jogs, load_cal, Rig, RIG as RIG_SETTINGS
 
 TRIGGER = 'std_srvs/srv/Trigger_Request'
 X0_MM = -845.0  # machine X of chamber x = 0 (the shipped calibration)
@@ -356,26 +356,23 @@ def test_status_says_what_is_true(tmp_path) -> None:
     try:
         assert rig.run_until(lambda: rig.controller.status is not None
                              and rig.controller.status.state == 'Alarm')
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: 'alarm' in status(rig)[1])  # the status that says so
         level, message, values = status(rig)
         assert level == 2 and 'alarm (no code)' in message and 'ALARM:0' not in message
         assert values['lamp_s'] == '0'
         assert call(rig, 'gantry/unlock').success
         assert rig.run_until(lambda: rig.controller.ready and rig.grbl.state == 'Idle')
-        settle(rig, 0.1)
         assert rig.command(1, mode=convert.MODE_BEAM, x=0.5, width=0.2).info == ''
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: status(rig)[2]['lamp_s'] == '1000')
         level, message, values = status(rig)
         assert (level, values['lamp_s'], values['last_failure']) == (0, '1000', '')
         rig.grbl.trigger_alarm(3)
-        assert rig.run_until(lambda: rig.controller.alarm == 3)
-        settle(rig, 0.1)
+        assert rig.run_until(lambda: rig.controller.alarm == 3 and status(rig)[0] == 2)
         level, message, values = status(rig)
         assert level == 2 and message.count('ALARM:3') == 1
         rig.grbl.unplug()
         assert rig.run_until(lambda: rig.controller.phase == 'offline')
-        settle(rig, 0.1)
-        assert status(rig)[2]['lamp_s'] == 'unknown'
+        assert rig.run_until(lambda: status(rig)[2]['lamp_s'] == 'unknown')
         for s in (m.status[0] for m in rig.transport.messages('gantry/status')):
             values = {kv.key: kv.value for kv in s.values}
             if s.level == 0:  # OK only with a report in hand and no alarm
@@ -395,8 +392,8 @@ def test_suppressed_warnings_are_counted_in_the_log(tmp_path) -> None:
         refused = [w for w in rig.transport.warnings if 'outside its travel' in w]
         assert len(refused) == 1  # throttled
         rig.transport.time_s += 10.0  # the throttle period passes, no fifth command
-        settle(rig, 0.05)
-        assert any('3 similar warnings suppressed' in w for w in rig.transport.warnings), \
+        assert rig.run_until(lambda: any('3 similar warnings suppressed' in w
+                                         for w in rig.transport.warnings)), \
             rig.transport.warnings
     finally:
         rig.close()
@@ -438,5 +435,138 @@ def test_homing_waits_for_the_estop_latch_to_be_released(tmp_path) -> None:
         assert homed.success, (homed.message, rig.controller.phase, rig.controller.status)
         assert rig.run_until(lambda: rig.node.safety.position_known)  # homing establishes it
         assert rig.grbl.lines.count('$H') == 1
+    finally:
+        rig.close()
+
+
+# --- 6. a fault stops the machine in every motion state, by GRBL's own rules ---------------------
+
+def realtime_bytes(grbl, mark: int) -> list[int]:
+    """The real-time bytes after ``mark`` but status requests, repeats merged."""
+    sent = [b for b in grbl.realtime[mark:] if b != 0x3F]
+    return [b for i, b in enumerate(sent) if i == 0 or b != sent[i - 1]]
+
+
+def test_the_emulator_restarts_a_starved_jog_as_a_cycle_that_only_a_hold_stops(tmp_path) -> None:
+    """GRBL 1.1 (protocol.c, stepper.c, motion_control.c, gcode.c): a starved segment buffer
+    during a jog ends in ``Run`` (auto cycle start); a jog cancel is then ignored; ``M5`` waits
+    for the planner to empty; a feed hold decelerates (``Hold:1``) and stops (``Hold:0``); a
+    reset at ``Hold:0`` keeps the position, no alarm, and switches the spindle off; a reset
+    while the hold decelerates is ``ALARM:3``."""
+    from grbl_emulator import GrblEmulator
+    from growspace_gantry.link import SerialLink
+
+    with GrblEmulator({**RIG_SETTINGS}, speedup=10.0, link_dir=tmp_path) as grbl:
+        link = SerialLink(grbl.port)
+        seen: list[str] = []
+
+        def until(predicate, send: bytes | None = None) -> str:
+            if send is not None:
+                link.write(send)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                for line in link.read_lines():
+                    seen.append(line)
+                    if predicate(line):
+                        return line
+                time.sleep(0.002)
+            raise AssertionError(f'not seen; got {seen[-5:]}')
+
+        def state() -> str:
+            return until(lambda x: x.startswith('<'), b'?')[1:].split('|')[0]
+
+        try:
+            for reset_at in ('Hold:0', 'Hold:1'):
+                link.write(b'\x18')
+                until(lambda x: x.startswith('Grbl '))
+                if grbl.state == 'Alarm':
+                    until(lambda x: x == 'ok', b'$X\n')
+                until(lambda x: x == 'ok', b'M3 S500\n')
+                until(lambda x: x == 'ok', b'$J=G53 X-800 F1000\n')
+                assert state() == 'Jog'
+                assert grbl.starve_segment_buffer()
+                assert state() == 'Run' and grbl.cycles_from_jogs
+                link.write(b'\x85')
+                assert state() == 'Run' and grbl.cancels[-1] != 'cancelled'
+                answers = len([x for x in seen if x == 'ok'])
+                link.write(b'M5\n')  # spindle_sync: waits for the planner to empty
+                link.write(b'!')
+                if reset_at == 'Hold:1':
+                    assert state() == 'Hold:1'
+                    link.write(b'\x18')
+                    until(lambda x: x == 'ALARM:3')
+                    assert grbl.jogs[-1]['outcome'] == 'reset'
+                    continue
+                while (now := state()) != 'Hold:0':
+                    assert now == 'Hold:1'
+                held = grbl.mpos
+                assert held[0] > -800.0 and grbl.spindle == ('M3', 500.0)  # M5 still waits
+                assert len([x for x in seen if x == 'ok']) == answers
+                link.write(b'\x18')
+                until(lambda x: x.startswith('Grbl '))
+                assert len([x for x in seen if x == 'ok']) == answers  # flushed, never run
+                assert state() == 'Idle' and grbl.mpos == held and grbl.spindle[0] == 'M5'
+                assert grbl.jogs[-1]['outcome'] == 'reset'
+            assert not any(line.startswith('ALARM') for line in seen[:-1])
+        finally:
+            link.close()
+
+
+def far_beam(rig: Rig) -> float:
+    """A beam at the far side of the chamber from the light: a move of ~0.7 m."""
+    return 0.1 if rig.grbl.mpos[0] > X0_MM + 450.0 else 0.8
+
+
+@pytest.mark.parametrize('mode', ['lockstep', 'realtime'])
+@pytest.mark.parametrize('state', ['Jog', 'Run', 'Hold'])
+def test_a_fault_stops_the_machine_in_every_motion_state(tmp_path, mode, state) -> None:
+    """Jog: a jog cancel. Run (GRBL restarted the jog as a cycle: a starved segment buffer):
+    a jog cancel does nothing there, so a feed hold, then a soft reset once ``Hold:0``. Hold
+    (a hold button after that): the reset once stopped. Each time the step fails with the
+    reason, the lamp goes off, the rest of the move never runs; after Run or Hold the position
+    must be re-established (a relative action is refused, an absolute one moves)."""
+    rig = Rig(tmp_path, mode=mode, watchdog_s=60.0)
+    lockstep = mode == 'lockstep'
+    try:
+        rig.ready()
+        place(rig)
+        rig.grbl.speedup = 10.0  # a move of seconds: the fault comes mid-move
+        answers = len(rig.results())
+        rig.transport.inject('light/command', beam(far_beam(rig), step_id=1 if lockstep else 0))
+        assert rig.run_until(lambda: rig.grbl.state == 'Jog')
+        mark, lines = len(rig.grbl.realtime), len(rig.grbl.lines)
+        if state == 'Jog':
+            rig.node.safety.fault('a fault injected by the test')
+        else:
+            assert rig.grbl.starve_segment_buffer()  # GRBL: Jog -> Run
+            if state == 'Hold':
+                rig.grbl.press_feed_hold()
+        assert rig.run_until(lambda: rig.controller.lamp_s == 0.0)
+        assert rig.run_until(lambda: rig.grbl.state == 'Idle' and rig.grbl.spindle[0] == 'M5'
+                             and rig.controller.ready and not rig.controller.motion.halting,
+                             timeout=10.0), (rig.grbl.state, rig.transport.warnings[-3:])
+        assert rig.grbl.jogs[-1]['outcome'] == ('cancelled' if state == 'Jog' else 'reset')
+        assert realtime_bytes(rig.grbl, mark) == {'Jog': [0x85], 'Run': [0x21, 0x18],
+                                                  'Hold': [0x18]}[state]
+        assert rig.controller.alarm is None  # a reset at Hold:0 keeps the position: no alarm
+        why = 'injected' if state == 'Jog' else f'went {state}'
+        if lockstep:
+            assert len(rig.results()) == answers + 1
+            assert 'error' in rig.results()[-1].info and why in rig.results()[-1].info
+        if state != 'Jog':  # the driver found it, and says so
+            assert any(why in w for w in rig.transport.warnings), rig.transport.warnings[-3:]
+        stopped = rig.grbl.mpos
+        settle(rig, 0.3)
+        assert rig.grbl.mpos == stopped and moves_after(rig, lines) == []
+        assert rig.node.safety.position_known == (state == 'Jog')
+        if state != 'Jog':
+            rig.transport.inject('light/command', act(RIGHT, step_id=2 if lockstep else 0))
+            settle(rig, 0.1)
+            assert moves_after(rig, lines) == []
+            assert any('re-established' in w for w in rig.transport.warnings)
+        rig.transport.inject('light/command', beam(0.5, step_id=3 if lockstep else 0))
+        assert rig.run_until(lambda: rig.controller.reached() and rig.grbl.spindle[0] == 'M3',
+                             timeout=10.0)
+        assert rig.grbl.mpos[0] == pytest.approx(X0_MM + 500.0, abs=0.05)
     finally:
         rig.close()

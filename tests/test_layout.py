@@ -29,7 +29,8 @@ LAYERS = (
     ('tools',),
 )
 # Inside the core, bottom to top (tasks/ is the challenges, above everything they use).
-CORE = ('errors', 'kernels', 'schema', 'task', 'config', 'light', 'state', 'chamber', 'tasks')
+CORE = ('errors', 'photoperiod', 'kernels', 'schema', 'task', 'config', 'light', 'state',
+        'chamber', 'tasks')
 MAX_LINES = 450
 
 

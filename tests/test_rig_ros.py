@@ -42,6 +42,7 @@ NAMESPACE = '/gs_test'
 STEPS_OF_A_STEP = ('camera/image_raw', 'plant/state', 'light/state', 'camera/photo',
                    'camera/measurement', 'step_result')
 ACTIONS = (1, 0, 2)
+GROWTH_S = 0.3
 
 
 @pytest.fixture
@@ -90,7 +91,8 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
                                                                         monkeypatch):
     bag = tmp_path / 'rig.mcap'
     camera = start_camera()
-    gantry = start_gantry(grbl, bag, '-p', 'capture_timeout_s:=30.0')  # a loaded CI machine
+    gantry = start_gantry(grbl, bag, '-p', 'capture_timeout_s:=30.0',  # a loaded CI machine
+                          '-p', f'growth_s:={GROWTH_S}')
     env = None
     try:
         wait_until_idle()
@@ -98,8 +100,11 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
                                  timeout_s=60.0, connect_timeout_s=30.0)
         obs, info = env.reset(seed=5)
         seen = [(obs, None, info)]
+        step_s = []
         for action in ACTIONS:
+            began = time.monotonic()
             obs, reward, terminated, truncated, info = env.step(action)
+            step_s.append(time.monotonic() - began)
             seen.append((obs, reward, info))
     finally:
         if env is not None:
@@ -108,6 +113,7 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
         camera_code, camera_log = camera.stop(signal.SIGTERM)
     assert (gantry_code, camera_code) == (0, 0), gantry_log + camera_log
     assert 'Traceback' not in gantry_log + camera_log
+    assert min(step_s) >= GROWTH_S, step_s  # each step grew under its light before its photo
 
     # The plant the twin grew is the simulator's under the reached light: the measured
     # reward is close to the simulator's own for the same seed and actions.
@@ -122,6 +128,14 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
     messages = recorded(bag)
     results = [msg for topic, msg in messages if topic == 'step_result']
     assert [r.step_id for r in results] == [0, 1, 2, 3] and not any(r.info for r in results)
+    # Each step's growth period is in the record: the rule in the metadata, and the status
+    # that says 'growing' once per step (a reset has none).
+    with Bag(bag) as b:
+        assert b.metadata['growspace_gantry']['growth_s'] == str(GROWTH_S)
+    phases = [v.value for topic, msg in messages if topic == 'gantry/status'
+              for v in msg.status[0].values if v.key == 'step']
+    assert [p for i, p in enumerate(phases) if p == 'growing' and phases[i - 1] != p] == \
+        ['growing'] * len(ACTIONS), phases
     for result, (obs, reward, info) in zip(results, seen):
         stamp = convert.to_ns(result.header.stamp)
         step = [(topic, msg) for topic, msg in messages if topic in STEPS_OF_A_STEP

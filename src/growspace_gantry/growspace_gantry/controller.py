@@ -99,9 +99,8 @@ class GrblController:
     @property
     def state(self) -> str:
         """The machine state of the last report ('Idle', 'Jog', 'Alarm', ...) or the phase."""
-        if self.phase != READY:
-            return self.phase
-        return self.status.state if self.status else 'unknown'
+        return self.phase if self.phase != READY else self.status.state if self.status \
+            else 'unknown'
 
     @property
     def ready(self) -> bool:
@@ -111,9 +110,7 @@ class GrblController:
     @property
     def lamp_reported(self) -> float | None:
         """The lamp power (S) the controller reports (status FS); None when unknown."""
-        if self.phase != READY or self.status is None:
-            return None
-        return self.status.speed
+        return self.status.speed if self.phase == READY and self.status is not None else None
 
     @property
     def target(self) -> dict[str, float] | None:
@@ -386,9 +383,12 @@ class GrblController:
                           f'gantry/home).')
         elif status.state != 'Alarm' and self.alarm is not None:
             self.alarm = None  # left by $X or $H
-        problem = self.motion.reported(status.state, self.position, self._settled)
-        if problem:
-            self._fail(problem)
+        problem = self.motion.reported(status.state, self.position, self._settled,
+                                       status.substate)
+        if problem:  # halting: an uncommanded motion ran the light where nobody asked
+            self._fail(problem, position_lost=self.motion.halting)
+            if self.motion.halting:
+                self.log.warn('grbl:uncommanded', f'gantry: {problem}; lamp off')
 
     def _send_due(self) -> None:
         """Write what the motion asks for (a jog cancel, a lamp line, the next jog)."""
@@ -396,15 +396,16 @@ class GrblController:
             return
         due = self.motion.due(self.status.state, self.position, self._settled,
                               self.counter.pending)
-        if isinstance(due, bytes):
-            self._write(due)
+        if isinstance(due, bytes):  # a soft reset: an uncommanded motion stopped, flush it
+            if self._write(due) and due == grbl.SOFT_RESET:
+                self._after_reset(self._now)
         elif due is not None:
             self._send_line(due)
 
     def _max_rate(self) -> float:
         """The fastest the machine can move [mm/min]: its max rates and homing seek rate."""
-        rates = [self.settings.get(n, 0.0) for n in (110, 111, 112, 25)]
-        return max(rates + [self.cal.feed_mm_min])
+        return max([self.settings.get(n, 0.0) for n in (110, 111, 112, 25)]
+                   + [self.cal.feed_mm_min])
 
     def _fail(self, reason: str, position_lost: bool = False) -> None:
         """A fault: the target and the lamp power asked for are cleared."""

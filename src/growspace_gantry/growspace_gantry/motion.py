@@ -13,6 +13,13 @@ it what to write. The rules, from GRBL 1.1's Jogging and Commands documentation:
 - G-code (the lamp's ``M3``/``M5``, the photo light's ``M8``/``M9``) only from Idle with no
   jog: GRBL refuses it while jogging (error:9). Both lights' lines go before the jog, so the
   photo light is off before the lamp moves.
+- The driver only ever jogs, so any other motion state is a motion nobody commanded (GRBL
+  restarts a jog as a cycle, ``Run``, when its segment buffer starves: protocol.c's auto cycle
+  start) and is stopped by GRBL's own rules, since a jog cancel does nothing outside Jog: a
+  feed hold ``!`` in ``Run``, nothing while a hold decelerates (``Hold:1``), and once stopped
+  (``Hold:0``) a soft reset ``0x18``, which flushes the planner (the rest of the move) and
+  switches the spindle (lamp) and coolant off; at ``Hold:0`` GRBL keeps its position and raises
+  no alarm (motion_control.c, ``mc_reset``).
 """
 
 from __future__ import annotations
@@ -54,11 +61,15 @@ class Motion:
         self.jogged = False  # the target's one jog was sent (or was not needed)
         self.queue: list[str] = []  # G-code waiting for Idle
         self.ask_status = False  # ask GRBL for a report now, not at the next period
+        self.halting = False  # stopping a motion the driver did not start (Run, Hold)
+        self._halt_byte: bytes | None = None  # the feed hold or soft reset due now
 
     @property
     def busy(self) -> bool:
-        """A move is under way: a jog on the machine, or one about to be sent."""
-        return self.jog is not None or (self.target is not None and not self.jogged)
+        """A move is under way: a jog on the machine, one about to be sent, or an uncommanded
+        motion being stopped."""
+        return self.jog is not None or (self.target is not None and not self.jogged) \
+            or self.halting
 
     def goto(self, target: Mapping[str, float]) -> None:
         self.target = dict(target)
@@ -75,6 +86,8 @@ class Motion:
         """The controller's buffers were emptied (a reset, a lost link): nothing is on it."""
         self.jog = None
         self.queue.clear()
+        self.halting = False
+        self._halt_byte = None
         self.lamp_accepted = None
         self.photo_accepted = None
 
@@ -102,8 +115,10 @@ class Motion:
             self.lamp_accepted = 0.0 if line == 'M5' else float(line.split('S')[1])
 
     def reported(self, state: str, position: Mapping[str, float] | None,
-                 settled: int) -> str | None:
+                 settled: int, substate: int | None = None) -> str | None:
         """A believed report: where the jog is in its life. Returns a fault, or None."""
+        if state in ('Run', 'Hold'):
+            return self._uncommanded(state, substate)
         jog = self.jog
         if jog is None or jog.phase == SENT:
             return None  # before its ok, a report says nothing about the jog
@@ -125,9 +140,32 @@ class Motion:
             return f'the controller went {state} during a jog'
         return None
 
+    def _uncommanded(self, state: str, substate: int | None) -> str | None:
+        """``Run`` or ``Hold``: a motion we did not start. Feed hold, then soft reset once
+        stopped (``Hold:0``); the first report of it is a fault (the jog it came from, if any,
+        is over)."""
+        if state == 'Run':
+            self._halt_byte = grbl.FEED_HOLD  # again at each Run report: idempotent in GRBL
+        elif substate == 0:
+            self._halt_byte = grbl.SOFT_RESET  # stopped: the reset flushes the rest, no alarm
+        if self.halting:
+            return None
+        self.halting = True
+        jog, self.jog = self.jog, None
+        what = f'{state}:{substate}' if substate is not None else state
+        during = f' during the jog to {mm(jog.target)}' if jog is not None else ''
+        return (f'the controller went {what}{during}, a motion the driver did not start (GRBL '
+                f'restarts a jog as a cycle when its segment buffer starves); a jog cancel does '
+                f'nothing outside Jog: feed hold, then a soft reset once stopped')
+
     def due(self, state: str, position: Mapping[str, float] | None, settled: int,
             in_flight: int) -> bytes | str | None:
-        """What to write now: ``0x85`` (bytes), a line (str), or None."""
+        """What to write now: ``0x85``, ``!`` or ``0x18`` (bytes), a line (str), or None."""
+        if self._halt_byte is not None:
+            halt, self._halt_byte = self._halt_byte, None
+            return halt
+        if self.halting:
+            return None  # a hold decelerating: nothing else until the reset
         jog = self.jog
         if jog is not None:
             if jog.target != self.target and jog.phase == RUNNING and state == 'Jog':

@@ -18,10 +18,12 @@ chamber namespace:
   move is done
 - out ``gantry/status`` (diagnostic_msgs/DiagnosticArray): state, position, alarm, buffer, link
   (1 Hz and on change)
+- with ``growth_s`` (lockstep): a step's growth period, lamp on at the target, between its move
+  and its photo (``growth.py``); the lamp follows the photoperiod (``lights_on``/``lights_off``)
 - with ``camera`` (lockstep): calls camera_node's ``camera/capture`` after each reached move and
-  answers the step when it answers (``photo.py``); out ``camera/image_raw``, ``plant/state``,
-  ``camera/photo`` (sensor_msgs/CompressedImage) and ``camera/measurement``, in the simulator's
-  order around ``light/state``, all with the step's stamp, and the measured reward
+  growth period, answers the step when it answers (``photo.py``); out ``camera/image_raw``,
+  ``plant/state``, ``camera/photo`` (sensor_msgs/CompressedImage) and ``camera/measurement``,
+  in the simulator's order around ``light/state``, all with the step's stamp, and the reward
 
 The light model is a ``Simulation`` that is never stepped: its light moves by ``core.light``
 (clamped inside the chamber exactly as in the simulator) and a reset places it with the task's
@@ -45,6 +47,7 @@ import numpy as np
 
 from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController, Log
+from growspace_gantry.growth import StepTime
 from growspace_gantry.photo import capture_request, outputs, Photographer, Shot
 from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
@@ -91,11 +94,13 @@ class GantryNode:
         params: the node settings.
         recorder: receives every message's CDR bytes, or None.
         clock: monotonic time [s].
+        wall_clock: UTC time [s since the epoch] (the growth period and the photoperiod).
     """
 
     def __init__(self, transport: Transport, controller: GrblController, cfg: SimConfig,
                  params: GantryParams, recorder: Recorder | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 wall_clock: Callable[[], float] = time.time) -> None:
         self.transport = transport
         self.log = transport.logger
         self.controller = controller
@@ -117,6 +122,8 @@ class GantryNode:
         self._channels: dict[str, int] = {}
         self._size_warned = False
         self.photo: Photographer | None = None
+        self.step_time = StepTime(params.growth_s if params.mode == 'lockstep' else 0.0,
+                                  params.photoperiod, wall_clock)
         camera = params.camera and params.mode == 'lockstep'
         self.outputs = (*OUTPUTS, *(CAMERA_OUTPUTS if camera else ()))
         self._pubs = {t.key: transport.publisher(t.typename, t.name, t.qos) for t in self.outputs}
@@ -232,21 +239,27 @@ class GantryNode:
                     pass
 
     def _poll(self, now: float) -> None:
-        c = self.controller
-        photo = self.photo
-        self.safety.tick(now, c.poll(now), photographing=photo is not None and photo.busy)
+        c, photo, grow = self.controller, self.photo, self.step_time
+        if c.target is not None:  # lit only inside the photoperiod; a fault clears the target
+            c.set_lamp(grow.lamp_s(self.params.lamp_power * self.cal.lamp_max_s))
+        self.safety.tick(now, c.poll(now), photographing=grow.busy or (
+            photo is not None and photo.busy))
         if self.pending is not None:
             reset_id, step_id, deadline = self.pending
             if c.reached():
                 self.pending = None
                 if step_id:
                     self.steps += 1
-                self._answer(reset_id, step_id)
+                if not grow.start(reset_id, step_id):
+                    self._answer(reset_id, step_id)
             elif c.phase != 'ready':
                 self._fail_pending(c.failure or f'the controller is {c.state}')
             elif now > deadline:
                 self.safety.fault(f'the move did not finish within move_timeout_s = '
                                   f'{self.params.move_timeout_s:g} s; holding, lamp off')
+        elif grow.busy:
+            if (grown := grow.poll()) is not None:
+                self._answer(grown.reset_id, grown.step_id)
         elif photo is not None:
             photo.poll(now)  # the photo light, the service, the camera's answer or a timeout
         flush = getattr(self.log, 'flush', None)
@@ -255,7 +268,7 @@ class GantryNode:
         realtime_due = self.params.mode == 'realtime' and now >= self._next_status
         key = (c.state, c.alarm, c.phase, c.fault, self.safety.estop_latched,
                self.safety.position_known, photo is not None and photo.phase,
-               c.photo_light_accepted)
+               c.photo_light_accepted, grow.phase())
         if key != self._status_key or now >= self._next_status:
             self._status_key = key
             self._next_status = now + (1.0 / self.params.status_hz if
@@ -265,14 +278,16 @@ class GantryNode:
                 self._publish('light', self._reached_light(0, self.transport.now_ns()))
 
     def _move(self, target: dict[str, float], step_id: int | None, placing: bool) -> None:
-        if self.pending is not None or (self.photo is not None and self.photo.busy):
+        if self.pending is not None or self.step_time.busy or (self.photo is not None
+                                                               and self.photo.busy):
             self._fail_pending(f'superseded by a newer command (step_id {step_id})')
         if self.cal.size is None and not self._size_warned:
             self._size_warned = True
             self.log.warn('size', f'gantry: the calibration has no size axis: the lamp lights a '
                           f'fixed {self.cal.fixed_size_m:g} m whatever width or radius is asked.')
         self.controller.goto(target)
-        self.controller.set_lamp(self.params.lamp_power * self.cal.lamp_max_s)
+        self.controller.set_lamp(self.step_time.lamp_s(self.params.lamp_power
+                                                       * self.cal.lamp_max_s))
         self.safety.accepted(self.clock(), placing)
         if step_id is not None:
             self.pending = (self.reset_id, step_id, self.clock() + self.params.move_timeout_s)
@@ -284,10 +299,11 @@ class GantryNode:
             self._result(step_id, self.reset_id, info=info)
 
     def _fail_pending(self, reason: str) -> None:
-        """Answer the step in progress (a move, or its photo) as failed."""
+        """Answer the step in progress (a move, its growth period or its photo) as failed."""
         shot = self.photo.abandon() if self.photo is not None else None
-        if shot is not None:
-            reset_id, step_id = shot.reset_id, shot.step_id
+        grown = self.step_time.abandon()
+        if shot is not None or grown is not None:
+            reset_id, step_id = (shot or grown).reset_id, (shot or grown).step_id
         elif self.pending is not None:
             reset_id, step_id, _ = self.pending
         else:
@@ -379,9 +395,9 @@ class GantryNode:
                 self._channels[t.key] = self.recorder.add_channel(
                     self.transport.resolve(t.name), t.typename, t.qos)
             self.recorder.add_metadata(METADATA_NAME, metadata)
-            self.recorder.add_metadata(GANTRY_METADATA, {
-                'version': __version__, 'port': self.params.port,
-                'calibration': json.dumps(_plain(self.cal), sort_keys=True)})
+            self.recorder.add_metadata(GANTRY_METADATA, {  # with each step's growth rule
+                'version': __version__, 'port': self.params.port, **self.params.step_time(),
+                'calibration': json.dumps(dataclasses.asdict(self.cal), sort_keys=True)})
         except Exception as e:  # noqa: BLE001 - recording never stops the machine's safety
             self._recording_failed(e)
 
@@ -432,6 +448,3 @@ class GantryNode:
             except Exception as e:  # noqa: BLE001 - shutting down goes on
                 self.log.warn('recorder', f'recorder close failed: {e}')
 
-
-def _plain(cal: Calibration) -> dict[str, Any]:
-    return dataclasses.asdict(cal)

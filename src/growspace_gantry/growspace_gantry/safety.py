@@ -10,7 +10,7 @@ e-stop) and hold the two latches.
       GRBL reports afterwards (it came back Idle, no alarm, after some e-stops);
    b. the controller is not ready: offline, connecting, a settings mismatch, no report yet;
    c. the controller is in alarm (only a person's ``gantry/unlock`` or ``gantry/home`` leaves
-      it);
+      it), or is stopping a motion the driver did not start (``Run``/``Hold``: see rule 5);
    d. the command is relative (a discrete or continuous action) and the machine position is
       not established: at start-up, after a lost link, a controller restart, an e-stop during
       a move or an alarm that loses steps, until a homing cycle, or a reset or absolute command
@@ -24,6 +24,11 @@ e-stop) and hold the two latches.
    waits for its answer), a refused command is not a command.
    When it trips, the lamp goes off and the machine holds.
 4. Nothing but a person unlocks an alarm or releases the e-stop latch (``gantry/unlock``).
+5. Every fault stops the machine in the state GRBL is in, by GRBL's rules (``motion.py``): in
+   Jog a jog cancel ``0x85``; in Run (a jog GRBL restarted as a cycle) a feed hold ``!``, then
+   once ``Hold:0`` a soft reset ``0x18``; a Hold is reset once stopped. The lamp asked for is 0
+   at once; GRBL's spindle output goes off with the reset (or ``M5`` at the next Idle after a
+   jog cancel). The position must then be re-established (rule 1d).
 """
 
 from __future__ import annotations
@@ -74,6 +79,9 @@ class Safety:
             return c.failure or f'the controller is {c.phase}'
         if c.alarm is not None:
             return f'{grbl.alarm_text(c.alarm)}; a person must call gantry/unlock or gantry/home'
+        if c.motion.halting:
+            return f'stopping a motion the driver did not start (controller: {c.state}): feed ' \
+                f'hold, then a soft reset once stopped'
         if c.status is None or c.position is None:
             return 'no status report with a machine position from the controller yet'
         if relative and not self.position_known:

@@ -10,8 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from growspace_sim.core import schema
+from growspace_sim.core.photoperiod import Photoperiod
 from growspace_sim.core.schema import Bounds, param
-from growspace_sim.node.params import check, frame_param, mode_param, seed_param
+from growspace_sim.node.params import check, frame_param, mode_param, ParamError, seed_param
+
+CLOCK = r'(|([01][0-9]|2[0-3]):[0-5][0-9])'  # HH:MM or empty
 
 
 @dataclass(frozen=True)
@@ -48,9 +51,38 @@ class GantryParams:
                               'M8 for each photo, M9 after it and on every fault')
     photo_settle_s: float = param(0.5, 'wait after the photo light is on before the photo',
                                   unit='s', bounds=Bounds(0.0, 60.0))
+    growth_s: float = param(0.0, "a lockstep step's growth period (the simulator's one growth "
+                            'iteration): after the move the lamp stays on at the target for '
+                            'this much lit time, then the photo and the answer; 0 = answer '
+                            'once the move is done (the plant then grows until the next step)',
+                            unit='s', bounds=Bounds(0.0, 1e7))
+    lights_on: str = param('', 'photoperiod: the lamp may be lit from this local standard time '
+                           '(a fixed UTC offset, never moved by DST); empty with lights_off = '
+                           'no night', pattern=CLOCK, pattern_doc='HH:MM, or empty')
+    lights_off: str = param('', 'photoperiod: the lamp is off from this local standard time '
+                            '(earlier than lights_on: the window crosses midnight); a growth '
+                            'period counts lit time only', pattern=CLOCK,
+                            pattern_doc='HH:MM, or empty')
+    utc_offset_h: float = param(0.0, 'local standard time minus UTC, all year', unit='h',
+                                bounds=Bounds(-14.0, 14.0))
 
     def __post_init__(self) -> None:
         check(self)
+        try:
+            _ = self.photoperiod  # the window as a whole (both times or neither, a length)
+        except ValueError as e:
+            raise ParamError(str(e)) from None
+
+    def step_time(self) -> dict[str, str]:
+        """What decides a step's time on the rig, for the recording's metadata: a replay or a
+        resumed run recomputes each step's growth period from it (``Photoperiod``)."""
+        return {name: str(getattr(self, name)) for name in (
+            'mode', 'growth_s', 'lights_on', 'lights_off', 'utc_offset_h')}
+
+    @property
+    def photoperiod(self) -> Photoperiod:
+        """The lights-on window (``lights_on``, ``lights_off``, ``utc_offset_h``)."""
+        return Photoperiod(self.lights_on, self.lights_off, self.utc_offset_h)
 
 
 if __name__ == '__main__':

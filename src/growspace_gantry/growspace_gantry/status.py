@@ -5,7 +5,11 @@ connecting, before the first status report, while the position is not establishe
 the watchdog tripped; OK (0) only with a report in hand and nothing of the above. ``lamp_s`` is
 the S the firmware reports (its status ``FS`` field), "unknown" while no report says so;
 ``photo_light`` is the last ``M8``/``M9`` GRBL accepted ("unknown" after a reset until the next),
-``photo`` where a step's photo is (empty without a camera).
+``photo`` where a step's photo is (empty without a camera). ``step`` is the lockstep step's
+phase (``moving``, ``growing``, ``growing, night: lamp off``, ``photo``, or empty between steps),
+``growth_left_s`` the lit seconds of its growth period still to come and ``growth_ends_in_s``
+the wall seconds to its end (nights included); ``lights`` whether the photoperiod lets the lamp
+be lit now (``on``, ``off (night)``).
 """
 
 from __future__ import annotations
@@ -41,6 +45,19 @@ def level_and_message(node: Any) -> tuple[int, str]:
     return OK, c.state
 
 
+def step_values(node: Any) -> dict[str, str]:
+    """The step's phase, its growth time left, and the photoperiod now."""
+    grow = node.step_time
+    lit_left, wall_left = grow.left()
+    if node.pending is not None:
+        phase = 'moving'
+    else:
+        phase = grow.phase() or ('photo' if node.photo is not None and node.photo.busy else '')
+    return {'step': phase, 'growth_left_s': f'{lit_left:.1f}',
+            'growth_ends_in_s': f'{wall_left:.1f}',
+            'lights': 'on' if grow.lamp_s(1.0) else 'off (night)'}
+
+
 def diagnostics(node: Any) -> Any:
     """The ``gantry/status`` message of a ``GantryNode`` now."""
     c = node.controller
@@ -66,6 +83,7 @@ def diagnostics(node: Any) -> Any:
         'photo': '' if node.photo is None else node.photo.phase,
         'photo_light': '' if not c.has_photo_light else
         {True: 'on', False: 'off', None: 'unknown'}[c.photo_light_accepted],
+        **step_values(node),
         'last_failure': c.failure or '',
         'warnings_suppressed': '' if suppressed is None else str(suppressed),
     }
