@@ -198,6 +198,8 @@ def test_device_rollout_buffer_trains_exactly_as_sb3s_buffer():
         train.build_model('dqn', train.make_env(ENV, 1, 0), 0, 'cpu', rollout_buffer='device')
     with pytest.raises(ValueError, match="rollout_buffer must be one of .* got 'gpu'"):
         train.build_model('ppo', train.make_env(ENV, 1, 0), 0, 'cpu', rollout_buffer='gpu')
+    with pytest.raises(SystemExit):
+        train.main(['--algo', 'dqn', '--rollout-buffer', 'device', '--steps', '10'])
 
 
 def test_resume_continues_a_run_and_its_curriculum_up_to_the_steps(tmp_path):

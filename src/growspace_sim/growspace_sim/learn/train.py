@@ -363,6 +363,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.vec == 'native' and args.bridge:
         parser.error('--vec native steps the chambers in process; with --bridge use dummy or '
                      'subproc')
+    if args.rollout_buffer == 'device' and args.algo not in ('ppo', 'a2c'):
+        parser.error(f'--rollout-buffer device is for ppo and a2c, not {args.algo}')
     if args.env not in gym.registry and not args.bridge:
         parser.error(f'unknown env id {args.env!r}')
     if args.steps < 1:
