@@ -26,6 +26,10 @@ best policy (highest mean return over the last 100 training episodes; the weight
 torch state dict) into ``DIR``, so that they fit the few files a lent machine hands back;
 the checkpoints (weights + Adam state, ~19 MB a run) stay in ``--out``.
 
+``report``: issue 32's summary line (``learning: runs=.. steps_per_run=.. ppo_beats_random=..
+ppo_within_oracle_10pct=.. camera_ratio_min=.. hours_total=..``) from ``growspace-compare``'s
+results.csv, the camera loop's JSON and the train calls' call_*.json.
+
 ``camera``: the policies ``export`` wrote, run closed loop on the twin rig, each step's
 observation drawn from the camera pipeline's measurement of a twin photo (as
 ``scripts/bench_camera.py``'s closed loop), against the same policy on the simulator's own
@@ -324,6 +328,55 @@ def export(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- report
+
+def report_line(results_csv: Path, camera_jsons: list[Path], call_jsons: list[Path]) -> str:
+    """Issue 32's summary line from growspace-compare's results.csv, the camera loop's JSON
+    files and the train calls' call_*.json.
+
+    ppo_beats_random: PPO's mean minus its s.e. above random's mean plus its s.e. (the ± 1 s.e.
+    intervals apart); ppo_within_oracle_10pct: PPO's mean at least 0.9 x the oracle's; both
+    over the cases with a PPO row. camera_ratio_min: the lowest camera / simulator return over
+    the challenges, with each challenge's JSON files (halves of its seeds) pooled.
+    hours_total: the training calls' wall time (calls that ended in the same minute ran side by
+    side and count once: the longest).
+    """
+    import csv  # noqa: PLC0415
+
+    rows: dict[str, dict[str, dict]] = defaultdict(dict)
+    with open(results_csv, newline='') as f:
+        for row in csv.DictReader(f):
+            rows[row['case']][row['agent']] = row
+    ppo = {case: agents for case, agents in rows.items() if 'ppo' in agents}
+    beats = sum(float(a['ppo']['mean']) - float(a['ppo']['se'])
+                > float(a['random']['mean']) + float(a['random']['se']) for a in ppo.values())
+    within = sum(float(a['ppo']['mean']) >= 0.9 * float(a['oracle']['mean'])
+                 for a in ppo.values())
+    steps = [int(a['ppo']['steps']) for a in ppo.values()]
+    runs = sum(int(a['ppo']['runs']) for a in ppo.values())
+    pooled: dict[str, tuple[list, list]] = defaultdict(lambda: ([], []))
+    for path in camera_jsons:
+        for challenge, r in json.loads(Path(path).read_text()).items():
+            pooled[challenge][0].extend(r['sim_returns'])
+            pooled[challenge][1].extend(r['camera_returns'])
+    ratios = [np.mean(cam) / np.mean(sim) for sim, cam in pooled.values() if np.mean(sim)]
+    by_start: dict[int, float] = {}
+    for path in call_jsons:  # calls that ended in the same minute ran side by side
+        call = json.loads(Path(path).read_text())
+        start = int(Path(path).stem.split('_')[1]) // 60
+        by_start[start] = max(by_start.get(start, 0.0), call['wall_s'])
+    hours = sum(by_start.values()) / 3600
+    return (f'learning: runs={runs} steps_per_run={int(np.mean(steps)) if steps else 0} '
+            f'ppo_beats_random={beats}/{len(ppo)} ppo_within_oracle_10pct={within}/{len(ppo)} '
+            f'camera_ratio_min={min(ratios) if ratios else float("nan"):.3f} '
+            f'hours_total={hours:.2f}')
+
+
+def report(args: argparse.Namespace) -> int:
+    print(report_line(Path(args.results), args.camera, args.calls))
+    return 0
+
+
 # ---------------------------------------------------------------- camera
 
 def camera(args: argparse.Namespace) -> int:
@@ -363,7 +416,13 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument('--episodes', type=int, default=20)
     c.add_argument('--seed', type=int, default=10_000)
     c.add_argument('--json')
+    r = sub.add_parser('report', help="issue 32's summary line")
+    r.add_argument('--results', required=True, help="growspace-compare's results.csv")
+    r.add_argument('--camera', nargs='*', default=[], help="camera's --json files")
+    r.add_argument('--calls', nargs='*', default=[], help="train's call_*.json files")
     args = parser.parse_args(argv)
+    if args.command == 'report':
+        return report(args)
     if args.command == 'profile':
         return profile(args)
     if args.command == 'train':
