@@ -182,6 +182,56 @@ def test_ppo_trains_on_the_native_vec_env_and_bad_choices_are_refused(tmp_path):
         train.main(['--vec', 'native', '--bridge', '--steps', '10'])
 
 
+def test_device_rollout_buffer_trains_exactly_as_sb3s_buffer():
+    """The same minibatches in the same order: the weights after an update are identical."""
+    params = {}
+    for kind in train.BUFFER_KINDS:
+        env = train.make_env(ENV, 2, 0, vec='native')
+        model = train.build_model('ppo', env, 0, 'cpu', SMOKE_HP['ppo'], rollout_buffer=kind)
+        model.learn(total_timesteps=256)  # two updates of 2 x 64 steps
+        params[kind] = [p.detach().clone() for p in model.policy.parameters()]
+        env.close()
+    assert len(params['sb3']) == len(params['device'])
+    for sb3, device in zip(params['sb3'], params['device']):
+        assert torch.equal(sb3, device)
+    with pytest.raises(ValueError, match="rollout_buffer='device' is for ppo and a2c, not 'dqn'"):
+        train.build_model('dqn', train.make_env(ENV, 1, 0), 0, 'cpu', rollout_buffer='device')
+    with pytest.raises(ValueError, match="rollout_buffer must be one of .* got 'gpu'"):
+        train.build_model('ppo', train.make_env(ENV, 1, 0), 0, 'cpu', rollout_buffer='gpu')
+    with pytest.raises(SystemExit):
+        train.main(['--algo', 'dqn', '--rollout-buffer', 'device', '--steps', '10'])
+
+
+def test_resume_continues_a_run_and_its_curriculum_up_to_the_steps(tmp_path):
+    env_id = 'GrowSpace/Shape-Curriculum-v0'
+    kwargs = dict(seed=0, out=tmp_path / 'run', n_envs=2, device='cpu', hp=SMOKE_HP['ppo'],
+                  env_kwargs={'episodes_per_stage': 1}, vec='native', progress_bar=False,
+                  log_interval=1, rollout_buffer='device', resume=True)
+    run = train.train('ppo', env_id, 128, **kwargs)  # nothing to resume: a fresh run
+    first = json.loads((run / 'run.json').read_text())
+    assert first['steps'] == 128 and len(first['legs']) == 1
+    assert first['curriculum_clock'] == [2, 2]  # 64 steps per chamber: episodes 1 and 2 begun
+
+    train.train('ppo', env_id, 256, **kwargs)
+    second = json.loads((run / 'run.json').read_text())
+    assert second['steps'] == 256
+    assert [(leg['steps_from'], leg['steps_to']) for leg in second['legs']] == [(0, 128),
+                                                                              (128, 256)]
+    assert second['curriculum_clock'] == [4, 4]  # the clock went on from 2, not from 0
+    assert second['wall_s'] >= first['wall_s']
+    with open(run / 'episodes.csv', newline='') as f:
+        episodes = list(csv.DictReader(f))
+    timesteps = [int(e['timestep']) for e in episodes]
+    assert len(episodes) == 4 and timesteps == sorted(timesteps) and timesteps[-1] > 128
+    assert (run / 'progress_until_128.csv').exists() and (run / 'progress.csv').exists()
+
+    before = (run / 'run.json').read_text()
+    train.train('ppo', env_id, 256, **kwargs)  # reached: nothing to do
+    assert (run / 'run.json').read_text() == before
+    with pytest.raises(ValueError, match='trained on 2 envs, not 4'):
+        train.train('ppo', env_id, 512, **{**kwargs, 'n_envs': 4})
+
+
 @pytest.mark.learning
 def test_ppo_learns_control_hard(tmp_path):
     """About 3 minutes on one core: PPO (case-study settings) beats random on control hard."""

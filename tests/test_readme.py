@@ -62,6 +62,8 @@ WHERE = [
      'needs torch (the learn extra): tests/test_learn.py where it is installed'),
     (r'^python scripts/case_studies\.py ', 'a record of past runs: the script is in git '
                                            'history (920d50b), docs/baselines.md says so'),
+    (r'^python scripts/learning_budget\.py ', 'needs torch and hours on a GPU machine: '
+     'tests/test_learn.py tests its resume and device buffer; docs/baselines.md records its run'),
 ]
 
 

@@ -44,12 +44,14 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 
 import growspace_sim  # noqa: F401  (registers the ids, also in subprocess workers)
 from growspace_sim import arguments
+from growspace_sim.learn.device_buffer import DeviceRolloutBuffer
 from growspace_sim.learn.native_vec import NativeVecEnv
 from growspace_sim.learn.networks import GrowSpaceCNN
 from growspace_sim.learn.rainbow import Rainbow
 
 ALGOS: dict[str, type[BaseAlgorithm]] = {'ppo': PPO, 'a2c': A2C, 'dqn': DQN, 'rainbow': Rainbow}
 VEC_KINDS = ('dummy', 'subproc', 'native')
+BUFFER_KINDS = ('sb3', 'device')  # PPO / A2C rollout buffers: SB3's, or learn.device_buffer
 
 # The paper's final PPO hyperparameters (appendix table). "Number of steps" is the rollout
 # length per env and "mini batch" the minibatch size; the table's Adam epsilon (0.25) and
@@ -78,18 +80,22 @@ class EpisodeLog(BaseCallback):
 
     FIELDS = ('timestep', 'wall_s', 'env', 'return', 'length')
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, wall_offset: float = 0.0) -> None:
+        """``wall_offset``: seconds of earlier legs of a resumed run; their rows are kept."""
         super().__init__()
         self.path = path
+        self.wall_offset = wall_offset
         self._file = None
         self._writer = None
         self._start = 0.0
 
     def _on_training_start(self) -> None:
-        self._file = open(self.path, 'w', newline='')
+        append = self.wall_offset > 0 and self.path.exists()
+        self._file = open(self.path, 'a' if append else 'w', newline='')
         self._writer = csv.writer(self._file)
-        self._writer.writerow(self.FIELDS)
-        self._start = time.perf_counter()
+        if not append:
+            self._writer.writerow(self.FIELDS)
+        self._start = time.perf_counter() - self.wall_offset
 
     def _on_step(self) -> bool:
         for index, info in enumerate(self.locals.get('infos', ())):
@@ -176,11 +182,23 @@ def bridge_env_id(env_id: str) -> str:
 
 
 def build_model(algo: str, env: VecEnv, seed: int, device: str = 'auto',
-                hp: dict[str, Any] | None = None, features_dim: int = 512) -> BaseAlgorithm:
-    """The SB3 model with the GrowSpace CNN encoder and the algorithm's defaults + ``hp``."""
+                hp: dict[str, Any] | None = None, features_dim: int = 512,
+                rollout_buffer: str = 'sb3') -> BaseAlgorithm:
+    """The SB3 model with the GrowSpace CNN encoder and the algorithm's defaults + ``hp``.
+
+    ``rollout_buffer='device'`` (PPO, A2C) cuts the minibatches on the training device
+    (``learn.device_buffer``): the same minibatches, fewer copies.
+    """
     if algo not in ALGOS:
         raise ValueError(f'algo must be one of {", ".join(ALGOS)}, got {algo!r}.')
+    if rollout_buffer not in BUFFER_KINDS:
+        raise ValueError(f'rollout_buffer must be one of {BUFFER_KINDS}, got {rollout_buffer!r}.')
     kwargs = {**DEFAULTS[algo], **(hp or {})}
+    if rollout_buffer == 'device':
+        if algo not in ('ppo', 'a2c'):
+            raise ValueError(f"rollout_buffer='device' is for ppo and a2c, not {algo!r} "
+                             '(DQN and Rainbow replay their own buffer).')
+        kwargs['rollout_buffer_class'] = DeviceRolloutBuffer
     policy_kwargs = dict(features_extractor_class=GrowSpaceCNN,
                          features_extractor_kwargs=dict(features_dim=features_dim))
     policy_kwargs.update(kwargs.pop('policy_kwargs', {}))
@@ -193,38 +211,101 @@ def train(algo: str, env_id: str, steps: int, seed: int = 0, out: str | os.PathL
           n_envs: int | None = None, device: str = 'auto', hp: dict[str, Any] | None = None,
           env_kwargs: dict | None = None, vec: str = 'dummy', checkpoint_every: int = 25_000,
           progress_bar: bool = True, threads: int = 1, log_interval: int | None = None,
-          bridge: bool = False, max_seconds: float | None = None) -> Path:
-    """Train and save; returns the run directory (see the module docstring for its files)."""
+          bridge: bool = False, max_seconds: float | None = None, rollout_buffer: str = 'sb3',
+          resume: bool = False) -> Path:
+    """Train and save; returns the run directory (see the module docstring for its files).
+
+    ``resume``: if ``out`` holds a ``model.zip`` and a ``run.json`` of an earlier leg, continue
+    from them up to ``steps`` in all (nothing to do when reached). The model (weights, Adam
+    state, steps) and the curriculum's clock carry over; the random streams do not (SB3 saves
+    none): the new leg seeds numpy, torch and the envs with ``seed`` + the steps reached, so a
+    resumed run is repeatable but not the same as one uninterrupted run. ``episodes.csv`` is
+    appended to, SB3's ``progress.csv`` of the earlier legs is kept as
+    ``progress_until_<steps>.csv``.
+    """
     torch.set_num_threads(threads)  # more threads than cores beside other work: ~100x slower
     n_envs = n_envs or DEFAULT_ENVS[algo]
     run_dir = Path(out)
     (run_dir / 'checkpoints').mkdir(parents=True, exist_ok=True)
+    before = _earlier_leg(run_dir) if resume else None
+    if before and before['steps'] >= steps:
+        return run_dir
     env = make_env(env_id, n_envs, seed, env_kwargs, vec, bridge)
-    model = build_model(algo, env, seed, device, hp)
+    if before:
+        model = ALGOS[algo].load(run_dir / 'model.zip', env=env, device=device)
+        model.set_random_seed(seed + model.num_timesteps)  # numpy, torch, action space, envs
+        if before.get('curriculum_clock') is not None:
+            _set_curriculum_clock(env, before['curriculum_clock'])
+        if (run_dir / 'progress.csv').exists():
+            (run_dir / 'progress.csv').rename(run_dir / f'progress_until_{before["steps"]}.csv')
+    else:
+        model = build_model(algo, env, seed, device, hp, rollout_buffer=rollout_buffer)
+    legs = list(before['legs']) if before else []
+    wall_before = sum(leg['wall_s'] for leg in legs)
     formats = ['csv'] + (['tensorboard'] if importlib.util.find_spec('tensorboard') else [])
     model.set_logger(configure(str(run_dir), formats))
     callbacks = CallbackList([
-        EpisodeLog(run_dir / 'episodes.csv'),
+        EpisodeLog(run_dir / 'episodes.csv', wall_before),
         CheckpointCallback(max(checkpoint_every // n_envs, 1), str(run_dir / 'checkpoints'),
                            name_prefix=algo)]
         + ([WallClockLimit(max_seconds)] if max_seconds else []))
     if log_interval is None:
         log_interval = 1 if algo == 'ppo' else (100 if algo == 'a2c' else 10)
+    first = int(model.num_timesteps)
     start = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=callbacks, log_interval=log_interval,
-                progress_bar=progress_bar and _has_progress_bar())
+    model.learn(total_timesteps=steps - first, callback=callbacks, log_interval=log_interval,
+                progress_bar=progress_bar and _has_progress_bar(), reset_num_timesteps=not before)
     wall = time.perf_counter() - start
     model.save(run_dir / 'model.zip')
+    clock = _curriculum_clock(env)
     env.close()
+    legs.append(dict(steps_from=first, steps_to=int(model.num_timesteps), wall_s=round(wall, 1),
+                     steps_per_s=round((model.num_timesteps - first) / wall, 1)))
+    total_wall = wall_before + wall
     import stable_baselines3  # noqa: PLC0415
     info = dict(algo=algo, env=env_id, steps=int(model.num_timesteps), steps_asked=steps,
                 seed=seed, n_envs=n_envs, vec=vec, device=str(model.device), threads=threads,
                 env_kwargs=env_kwargs or {}, bridge=bridge, max_seconds=max_seconds,
+                rollout_buffer=before.get('rollout_buffer', 'sb3') if before else rollout_buffer,
                 hyperparameters={**DEFAULTS[algo], **(hp or {})},
-                wall_s=round(wall, 1), steps_per_s=round(model.num_timesteps / wall, 1),
+                wall_s=round(total_wall, 1),
+                steps_per_s=round(model.num_timesteps / total_wall, 1), legs=legs,
+                curriculum_clock=clock,
                 torch=torch.__version__, stable_baselines3=stable_baselines3.__version__)
     (run_dir / 'run.json').write_text(json.dumps(info, indent=2, default=str) + '\n')
     return run_dir
+
+
+def _earlier_leg(run_dir: Path) -> dict | None:
+    """run.json of an earlier leg with its model.zip, or None (a fresh run)."""
+    if not ((run_dir / 'model.zip').exists() and (run_dir / 'run.json').exists()):
+        return None
+    info = json.loads((run_dir / 'run.json').read_text())
+    info.setdefault('legs', [dict(steps_from=0, steps_to=info['steps'], wall_s=info['wall_s'],
+                                  steps_per_s=info['steps_per_s'])])
+    return info
+
+
+def _curriculum_clock(env: VecEnv) -> list | None:
+    """Episodes begun per chamber (the digit curriculum's clock), or None without one."""
+    try:
+        clock = env.get_attr('episodes')
+    except AttributeError:
+        return None
+    if clock and isinstance(clock[0], list):  # the native vector env: one list for all
+        return [int(n) for n in clock[0]]
+    return [int(n) for n in clock]
+
+
+def _set_curriculum_clock(env: VecEnv, clock: list[int]) -> None:
+    if len(clock) != env.num_envs:
+        raise ValueError(f'the run was trained on {len(clock)} envs, not {env.num_envs}: '
+                         'resume it with the same --n-envs.')
+    if isinstance(env.get_attr('episodes')[0], list):
+        env.set_attr('episodes', list(clock))
+    else:
+        for i, episodes in enumerate(clock):
+            env.set_attr('episodes', episodes, indices=[i])
 
 
 def load_model(path: str | os.PathLike, device: str = 'cpu') -> BaseAlgorithm:
@@ -277,6 +358,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-minutes', type=arguments.number(0, low_open=True),
                         help='stop after this much wall time even if --steps is not reached')
     parser.add_argument('--no-progress-bar', action='store_true')
+    parser.add_argument('--rollout-buffer', choices=BUFFER_KINDS, default='sb3',
+                        help="ppo/a2c: 'device' cuts minibatches on the training device")
+    parser.add_argument('--resume', action='store_true',
+                        help='continue the run in --out from its model.zip up to --steps')
     parser.add_argument('--bridge', action='store_true',
                         help='train through the ROS Gymnasium bridge (growspace_gym_bridge)')
     args = parser.parse_args(argv)
@@ -285,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.vec == 'native' and args.bridge:
         parser.error('--vec native steps the chambers in process; with --bridge use dummy or '
                      'subproc')
+    if args.rollout_buffer == 'device' and args.algo not in ('ppo', 'a2c'):
+        parser.error(f'--rollout-buffer device is for ppo and a2c, not {args.algo}')
     if args.env not in gym.registry and not args.bridge:
         parser.error(f'unknown env id {args.env!r}')
     try:
@@ -296,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = train(args.algo, args.env, args.steps, args.seed, out, args.n_envs, args.device, hp,
                     args.env_kwargs, args.vec, args.checkpoint_every,
                     not args.no_progress_bar, args.threads, args.log_interval, args.bridge,
-                    args.max_minutes * 60 if args.max_minutes else None)
+                    args.max_minutes * 60 if args.max_minutes else None, args.rollout_buffer,
+                    args.resume)
     info = json.loads((run_dir / 'run.json').read_text())
     returns = np.loadtxt(run_dir / 'episodes.csv', delimiter=',', skiprows=1, usecols=3, ndmin=1)
     tail = returns[-20:] if returns.size else np.array([np.nan])
