@@ -14,7 +14,10 @@
 - ``compare A B``: the applied light of B against A, matched by episode and step_id, max and
   RMS per field (a simulated run and the same commands replayed onto the LED gantry);
 - ``recover BAG OUT``: copy every readable chunk of a file cut short by a crash or damaged,
-  and say what was skipped.
+  and say what was skipped; ``recover DIR`` repairs a split recording's last file in place.
+
+BAG is a ``.mcap`` file or a split recording's directory (``recording.SplitRecorder``): its files
+read as one.
 
 An unreadable chunk never stops a reader: it is skipped and named (``Bag.damage``).
 

@@ -88,9 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     p_compare.add_argument('--namespace-b')
     p_compare.add_argument('--tolerance-mm', type=float,
                            help='exit 1 if any field of B is farther than this from A')
-    p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')
+    p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file '
+                               'into OUT; a split recording directory: its last file, in place')
     p_recover.add_argument('bag')
-    p_recover.add_argument('out')
+    p_recover.add_argument('out', nargs='?')
     return parser
 
 
@@ -156,7 +157,22 @@ def main(argv: list[str] | None = None) -> int:
             if args.tolerance_mm is not None and not result.within(args.tolerance_mm / 1e3):
                 print(f'OUT OF TOLERANCE: a field differs by more than {args.tolerance_mm} mm')
                 return 1
+        elif args.command == 'recover' and recording.is_split_recording(args.bag):
+            if args.out is not None:
+                parser.error(f'out = {args.out!r}: a split recording ({args.bag}) is repaired '
+                             f'in place; give no OUT.')
+            fixed = recording.repair(args.bag)
+            if fixed.damaged is None:
+                print(f'{args.bag}: every file is complete; nothing to recover')
+            elif fixed.path is None:
+                print(f'{args.bag}: moved unreadable {fixed.damaged.name} aside ({fixed.reason})')
+            else:
+                print(f'recovered {fixed.messages} messages into {fixed.path} ({fixed.reason}); '
+                      f'the damaged original is {fixed.damaged}')
         elif args.command == 'recover':
+            if args.out is None:
+                parser.error(f'out: required for a single file ({args.bag}); only a split '
+                             f'recording directory is repaired in place.')
             rep = recording.recover(args.bag, args.out)
             state = 'file was complete' if rep.complete else f'stopped at byte {rep.stopped_at}' \
                 f'{": " + rep.reason if rep.reason else ""}'
