@@ -37,9 +37,10 @@ from growspace_sim.replay.episodes import (
     Episode, StepRecord, format_summary, read_episodes, summary)
 from growspace_sim.replay.export import export_episode
 from growspace_sim.replay.play import play, play_steps, StepReplay
-from growspace_sim.replay.resim import COMPARED, Mismatch, ResimReport, resimulate
+from growspace_sim.replay.resim import (
+    COMPARED, Mismatch, ResimReport, resimulate, resume_point, ResumePoint)
 
 __all__ = ['Bag', 'BagMessage', 'COMPARED', 'Comparison', 'Episode', 'Mismatch', 'ReplayError',
-           'ResimReport', 'StepRecord', 'StepReplay', 'TopicInfo', 'compare', 'export_episode',
-           'format_comparison', 'format_summary', 'main', 'play', 'play_steps', 'read_episodes',
-           'resimulate', 'summary']
+           'ResimReport', 'ResumePoint', 'StepRecord', 'StepReplay', 'TopicInfo', 'compare',
+           'export_episode', 'format_comparison', 'format_summary', 'main', 'play',
+           'play_steps', 'read_episodes', 'resimulate', 'resume_point', 'summary']
