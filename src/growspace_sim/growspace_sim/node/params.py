@@ -75,7 +75,7 @@ class NodeParams:
     record_max_bytes: int = param(0, 'split the recording into files of about this many message '
                                   'bytes: record_path is then a directory of NAME_0.mcap, '
                                   'NAME_1.mcap, ... (rosbag2 --max-bag-size); 0 = one file',
-                                  unit='B', bounds=Bounds(0, integer=True))
+                                  unit='B', bounds=Bounds(0, 10**15, integer=True))
     record_max_duration_s: float = param(0.0, 'split the recording into files of at most this '
                                          'much sim time each (rosbag2 --max-bag-duration); '
                                          '0 = no duration limit', unit='s', bounds=Bounds(0.0))

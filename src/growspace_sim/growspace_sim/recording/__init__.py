@@ -34,7 +34,8 @@ from growspace_sim.recording.recorder import (
     CHUNK_SIZE, FLUSH_PERIOD_S, LIBRARY, McapRecorder, PROFILE, RecordingError, stop_on_signals)
 from growspace_sim.recording.recovery import recover, RecoveryReport
 from growspace_sim.recording.splits import (
-    is_split_recording, repair, RepairReport, split_files, split_path, SplitRecorder)
+    is_split_recording, repair, RepairReport, split_files, split_path, SplitRecorder,
+    wait_until_free)
 from growspace_sim.ros.interface import (  # noqa: F401 - re-exported: part of the file format
     FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 
@@ -42,4 +43,4 @@ __all__ = ['CHUNK_SIZE', 'FLUSH_PERIOD_S', 'FORMAT', 'LIBRARY', 'McapRecorder', 
            'PROFILE', 'RecordingError', 'RecoveryReport', 'config_dict', 'config_json',
            'RepairReport', 'SplitRecorder', 'digit_fingerprint', 'growspace_metadata',
            'is_split_recording', 'recover', 'repair', 'split_files', 'split_path',
-           'stop_on_signals']
+           'stop_on_signals', 'wait_until_free']

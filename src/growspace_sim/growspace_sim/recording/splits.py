@@ -14,6 +14,9 @@ Limits, both checked before each batch (0 = none):
 - ``max_duration_s``: log time one file spans, from its first message [s] (sim time for
   ``sim_node``, so a run at any speed splits at the same steps; wall time on the rig).
 
+The writing recorder holds a lock on ``NAME/.lock`` (``flock``, freed by the OS however the
+process ends), so a second recorder or a ``repair`` never touches a file still being written.
+
 ``metadata.yaml`` is rewritten (atomically) whenever a file is closed. After a crash it lags;
 readers therefore take the files from the directory itself (``split_files``), as
 ``ros2 bag reindex`` does. ``repair`` copies the readable part of a damaged last file back under
@@ -27,10 +30,12 @@ from __future__ import annotations
 from collections.abc import Iterable
 import contextlib
 import dataclasses
+import fcntl
 import os
 from pathlib import Path
 import re
 import threading
+import time
 
 import yaml
 
@@ -39,6 +44,7 @@ from growspace_sim.recording.recorder import (
 from growspace_sim.ros import qos as ros_qos
 
 METADATA_FILE = 'metadata.yaml'
+LOCK_FILE = '.lock'  # held (flock) by the recorder writing the directory; the OS frees it on exit
 DAMAGED_SUFFIX = '.damaged'  # the original of a repaired file, kept for a person to look at
 _RECOVERING_SUFFIX = '.recovering'
 
@@ -67,6 +73,39 @@ def is_split_recording(path: str | os.PathLike) -> bool:
     return path.is_dir() and bool(split_files(path))
 
 
+def _lock(directory: Path) -> int:
+    """Take the directory's writer lock; returns its fd.
+
+    Raises:
+        RecordingError: another process holds it (a recorder still writing there).
+    """
+    fd = os.open(directory / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise RecordingError(f'{directory} is being recorded by another process (it holds '
+                             f'{directory / LOCK_FILE}); wait for it to stop.') from None
+    return fd
+
+
+def wait_until_free(directory: str | os.PathLike, timeout_s: float) -> bool:
+    """Wait until no recorder writes ``directory`` (e.g. a node finishing its last file after
+    its parent died). Returns whether it is free; a missing directory is free."""
+    directory = Path(directory)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if not directory.is_dir():
+            return True
+        try:
+            os.close(_lock(directory))  # closing the fd releases the lock
+            return True
+        except RecordingError:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.05)  # polling a lock another process holds: no event to wait on
+
+
 @dataclasses.dataclass
 class RepairReport:
     """What ``repair`` did to the last file of a split recording."""
@@ -93,11 +132,20 @@ def repair(directory: str | os.PathLike) -> RepairReport:
         What was done (``path`` None: the files were all complete).
 
     Raises:
-        RecordingError: The directory cannot be read or written.
+        RecordingError: The directory cannot be read or written, or a recorder writes it now.
     """
-    from growspace_sim.recording.recovery import readable_summary, recover
 
     directory = Path(directory)
+    fd = _lock(directory)  # never "repair" a file a live recorder is writing
+    try:
+        return _repair(directory)
+    finally:
+        os.close(fd)
+
+
+def _repair(directory: Path) -> RepairReport:
+    from growspace_sim.recording.recovery import readable_summary, recover
+
     for leftover in directory.glob(f'*{_RECOVERING_SUFFIX}'):
         # A repair cut short: the damaged original is still in place (renamed last), redo it.
         original = leftover.with_name(leftover.name[:-len(_RECOVERING_SUFFIX)])
@@ -177,7 +225,8 @@ class SplitRecorder:
             raise RecordingError(f'{self.directory} is a file; a split recording is a '
                                  f'directory.')
         if append and self.directory.is_dir():
-            repair(self.directory)
+            self._lock_fd = _lock(self.directory)
+            _repair(self.directory)
             existing = split_files(self.directory)
             self._index = _index_of(existing[-1]) + 1 if existing else 0
         else:
@@ -189,9 +238,13 @@ class SplitRecorder:
             except OSError as e:
                 raise RecordingError(f'Cannot create recording directory {self.directory}: '
                                      f'{e.strerror or e}') from e
+            self._lock_fd = _lock(self.directory)
             self._index = 0
-        self._first_index = self._index
-        self._recorder = self._open(self._index)
+        try:
+            self._recorder = self._open(self._index)
+        except RecordingError:
+            os.close(self._lock_fd)
+            raise
 
     # ------------------------------------------------------------------ Recorder protocol
     @property
@@ -269,7 +322,10 @@ class SplitRecorder:
             if self._closed:
                 return
             self._closed = True
-            self._finish_file()
+            try:
+                self._finish_file()
+            finally:
+                os.close(self._lock_fd)
 
     def __enter__(self) -> SplitRecorder:
         return self

@@ -1,0 +1,6 @@
+"""Experiments on a chamber that last days: a run directory, a journal, a runner that resumes.
+
+Modules: ``rundir`` (the run directory and its journal; pure, files only), ``policies`` (the
+policies a run uses and the simulated twin the oracle acts on), ``runner`` (the loop and the
+chambers over the Gymnasium bridge's ``ChamberLink``) and ``cli`` (``growspace-rig``).
+"""

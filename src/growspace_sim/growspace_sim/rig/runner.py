@@ -1,0 +1,474 @@
+"""The experiment runner: a policy drives a lockstep chamber for N episodes, and resumes.
+
+The loop (``Runner.run``) is written once against ``RigChamber``: ``reset(reset_id, seed)`` and
+``step(reset_id, step_id, action)`` answered by the chamber's ``step_result`` and image, over
+the bridge's ``ChamberLink`` (the same topics a Gymnasium agent uses):
+
+- ``SimChamber``: the runner starts ``sim_node`` (lockstep) recording into the run directory,
+  split by size and duration; on resume it starts it again with ``resume_path`` on that
+  recording, so the simulator continues the same episode bit for bit;
+- ``AttachedChamber``: a lockstep chamber someone started (``sim_node``, or ``gantry_node`` with
+  ``camera_node``), attached by namespace.
+
+Nothing twice, nothing lost: before a step is sent its intent is journaled (fsynced), after its
+answer its completion. On resume the recording is what the chamber did, the journal what the
+runner knows; ``reconcile`` makes them agree before the next step:
+
+- a step the chamber answered (in its recording) but the journal has only as intent is
+  adopted from the recording, never sent again;
+- steps the journal holds but the recording lost (a chamber killed before its last chunk
+  reached the disk) are re-simulated on the resumed simulator with their journaled actions and
+  checked against the journaled rewards bit for bit, which records them (once);
+- a reset the chamber answered but the journal lacks is adopted the same way.
+
+Each step gets a new step_id (never one sent before), so the chamber's lockstep rule refuses any
+late duplicate. Where the chamber refuses a step (an attached gantry in alarm or e-stop: a
+person must clear it), the runner says so, waits ``retry_period_s`` and tries again with a new
+step_id. Hook for the rig's growth period and photoperiod (``gantry_node`` ``growth_s``, built
+separately): the runner only needs the step's answer, so a gantry step that lasts hours needs
+no change here beyond ``step_timeout_s`` covering it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import dataclasses
+import datetime as dt
+import os
+from pathlib import Path
+import secrets
+import time
+from typing import Any, Protocol
+
+import numpy as np
+
+from growspace_sim.core.config import SimConfig
+from growspace_sim.rig.policies import make_policy, Twin
+from growspace_sim.rig.rundir import format_progress, RunDir, RunDirError, RunSettings
+from growspace_sim.ros import convert
+
+RESET_ID_BASE = 1 << 20  # episode i is reset with reset_id RESET_ID_BASE + i + 1 (the node's
+# own start-up episode is reset_id 0; a fixed id lets a resume find the episode in a recording)
+
+
+class RunnerError(Exception):
+    """The run cannot go on; the message says why and what a person can do."""
+
+
+@dataclasses.dataclass
+class Answer:
+    """A chamber's answer to a reset or a step."""
+
+    info: str  # '' = done; else why it was refused
+    reward: float = 0.0
+    terminated: bool = False
+    truncated: bool = False
+    step: int = 0  # the chamber's step count in the episode
+    observation: np.ndarray | None = None
+
+
+class RigChamber(Protocol):
+    """A lockstep chamber the runner drives."""
+
+    recording: Path | None  # where its recording is, if the runner can read it
+
+    def prepare(self) -> None:
+        """Before a resume: make the recording readable (its writer gone, a damaged last file
+        repaired)."""
+
+    def start(self, resume: bool) -> None: ...
+
+    def reset(self, reset_id: int, seed: int) -> Answer: ...
+
+    def step(self, reset_id: int, step_id: int, action: int) -> Answer: ...
+
+    def close(self) -> None: ...
+
+
+def reset_id_of(episode: int) -> int:
+    """The reset_id episode ``episode`` (0-based) is sent with."""
+    return RESET_ID_BASE + episode + 1
+
+
+@dataclasses.dataclass
+class RecordedStep:
+    step: int
+    step_id: int
+    reward: float
+    terminated: bool
+    truncated: bool
+    image: Any = None  # the BagMessage of its camera image, decoded on demand
+
+    @property
+    def observation(self) -> np.ndarray | None:
+        return None if self.image is None else convert.image_from_msg(self.image.decode())
+
+
+def recorded_episodes(path: Path | None) -> dict[int, list[RecordedStep]]:
+    """The steps a finished recording holds of each episode (index 0 = its reset), by reset_id
+    (the last episode with an id wins). Read before the chamber starts writing there again."""
+    from growspace_sim.replay import Bag, read_episodes
+
+    if path is None or not path.exists():
+        return {}
+    from growspace_sim.recording import split_files
+
+    if path.is_dir() and not split_files(path):
+        return {}
+    out = {}
+    with Bag(path) as bag:
+        for episode in read_episodes(bag):
+            out[episode.reset_id] = [RecordedStep(
+                int(r.result.step), int(r.result.step_id), float(r.result.reward),
+                bool(r.result.terminated), bool(r.result.truncated),
+                r.outputs.get('camera/image_raw')) for r in episode.steps]
+    return out
+
+
+class Runner:
+    """Runs (or resumes) the experiment of a run directory.
+
+    Args:
+        rundir: The run directory (its settings and journal).
+        chamber: The chamber to drive.
+        say: Where the progress lines go (one line per step, and what a person must do).
+        clock: UTC now (tests replace it).
+        sleep: Waits [s] (tests replace it).
+    """
+
+    def __init__(self, rundir: RunDir, chamber: RigChamber, say: Callable[[str], None] = print,
+                 clock: Callable[[], dt.datetime] | None = None,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.rundir = rundir
+        self.settings: RunSettings = rundir.settings
+        self.chamber = chamber
+        self.say = say
+        self.clock = clock or (lambda: dt.datetime.now(dt.UTC))
+        self.sleep = sleep
+        self.cfg = SimConfig(challenge=self.settings.challenge, setting=self.settings.setting)
+        self.twin = Twin(self.cfg)
+        self.policy = make_policy(self.settings.policy, self.settings.policy_path,
+                                  self.settings.seed)
+        self.observation: np.ndarray | None = None
+        self._step_seconds: float | None = None
+        self._next_at: dt.datetime | None = None
+        self._sent_ids: dict[int, int] = {}  # reset_id -> highest step_id sent or journaled
+
+    # ------------------------------------------------------------------ the loop
+    def run(self) -> None:
+        """Run until every episode is done; resumes if the journal holds anything.
+
+        Raises:
+            RunnerError: The chamber answered what the journal cannot match, or refused a step
+                of the simulator.
+            RunDirError: The journal cannot be written.
+        """
+        state = self.rundir.state
+        recording = self.chamber.recording
+        # A chamber's recording without a journal: the runner died before its first event
+        # (the reset it sent may be recorded); reconcile adopts what the chamber did.
+        resuming = state.events > 0 or (recording is not None and recording.exists())
+        recorded: dict[int, list[RecordedStep]] = {}
+        if resuming:
+            self.chamber.prepare()  # the chamber's recording finished and repaired
+            recorded = recorded_episodes(recording)
+        self.chamber.start(resume=resuming)
+        if resuming:
+            self.reconcile(recorded)
+        while True:
+            state = self.rundir.state
+            episode = state.current
+            if episode is None:
+                index = state.episodes[-1].index + 1 if state.episodes else 0
+                if index >= self.settings.episodes:
+                    break
+                self._reset(index)
+                continue
+            self._step(episode)
+
+    def _reset(self, index: int) -> None:
+        seed = self.settings.episode_seed(index)
+        reset_id = reset_id_of(index)
+        answer = self.chamber.reset(reset_id, seed)
+        if answer.info:
+            raise RunnerError(f'the chamber refused the reset of episode {index + 1} '
+                              f'(reset_id {reset_id}, seed {seed}): {answer.info}')
+        self.twin.reset(index, seed)
+        self.rundir.append('reset', episode=index, reset_id=reset_id, seed=seed)
+        self.observation = answer.observation
+
+    def _step(self, episode: Any) -> None:
+        self._wait_for_step_time()
+        step = len(episode.steps) + 1
+        step_id = self._new_step_id(episode)
+        pending = self.rundir.state.pending
+        # A step in progress at a crash that reconcile could not place is redone with its
+        # journaled action (the same one the policy gives; kept for a policy that is not).
+        action = int(pending['action']) if pending and int(pending['step']) == step \
+            and int(pending['episode']) == episode.index else \
+            int(self.policy.act(self.observation, self.twin))
+        started = time.monotonic()
+        self._next_at = None
+        self.rundir.append('intent', episode=episode.index, step=step, step_id=step_id,
+                           action=action)
+        answer = self.chamber.step(episode.reset_id, step_id, action)
+        if answer.info:
+            self._refused(episode, step, step_id, answer.info)
+            return
+        self._complete(episode, step, step_id, action, answer)
+        elapsed = time.monotonic() - started
+        self._step_seconds = elapsed if self._step_seconds is None else \
+            0.8 * self._step_seconds + 0.2 * elapsed
+        self._next_at = self.clock() + dt.timedelta(
+            seconds=max(0.0, self.settings.step_period_s - elapsed))
+        self.say(format_progress(self.settings, self.rundir.state, self.cfg.episode_length,
+                                 self.clock(), self._next_at, self._step_seconds))
+
+    def _complete(self, episode: Any, step: int, step_id: int, action: int,
+                  answer: Answer) -> None:
+        outcome = self.twin.step(action)
+        self.rundir.append('step', episode=episode.index, step=step, step_id=step_id,
+                           action=action, reward=answer.reward, terminated=answer.terminated,
+                           truncated=answer.truncated)
+        self.observation = answer.observation
+        if isinstance(self.chamber, SimChamber) and outcome.reward != answer.reward:
+            # On sim_node the twin is the chamber bit for bit; a difference is a bug to report.
+            self.rundir.append('note', text=f'episode {episode.index + 1} step {step}: the twin '
+                               f'gave reward {outcome.reward!r}, the chamber {answer.reward!r}')
+
+    def _refused(self, episode: Any, step: int, step_id: int, info: str) -> None:
+        if isinstance(self.chamber, SimChamber):
+            raise RunnerError(f'sim_node refused step {step} of episode {episode.index + 1} '
+                              f'(step_id {step_id}): {info}')
+        text = (f'episode {episode.index + 1} step {step} was refused by the chamber: {info}. '
+                f'If the gantry is in alarm or e-stop, a person must look at it and clear it '
+                f'(gantry/unlock, gantry/home); the runner tries again every '
+                f'{self.settings.retry_period_s:g} s.')
+        self.rundir.append('note', text=text)
+        self.say(f'WAITING FOR A PERSON: {text}')
+        self.sleep(self.settings.retry_period_s)
+
+    def _new_step_id(self, episode: Any) -> int:
+        pending = self.rundir.state.pending
+        used = max(episode.last_step_id, self._sent_ids.get(episode.reset_id, 0),
+                   int(pending['step_id']) if pending else 0)
+        self._sent_ids[episode.reset_id] = used + 1
+        return used + 1
+
+    def _wait_for_step_time(self) -> None:
+        if self._next_at is None:
+            return
+        remaining = (self._next_at - self.clock()).total_seconds()
+        if remaining > 0:
+            self.sleep(remaining)
+
+    # ------------------------------------------------------------------ resume
+    def reconcile(self, recorded_by_id: dict[int, list[RecordedStep]]) -> None:
+        """Make the journal and the chamber agree after a restart (see the module doc).
+
+        Args:
+            recorded_by_id: What the chamber's recording holds (``recorded_episodes``), read
+                before the chamber started again; empty without a recording.
+
+        Raises:
+            RunnerError: They cannot agree (the recording holds steps the journal never
+                sent, or a re-simulated reward differs from the journaled one).
+        """
+        state = self.rundir.state
+        recording = self.chamber.recording
+        adopted, caught_up = [], 0
+        episode = state.current
+        if episode is None:  # between episodes: was the next reset answered already?
+            index = state.episodes[-1].index + 1 if state.episodes else 0
+            if index < self.settings.episodes and recording is not None:
+                if recorded_by_id.get(reset_id_of(index)):
+                    self.twin.reset(index, self.settings.episode_seed(index))
+                    self.rundir.append('reset', episode=index, reset_id=reset_id_of(index),
+                                       seed=self.settings.episode_seed(index))
+                    adopted.append('reset')
+                    episode = self.rundir.state.current
+            if episode is None:
+                self.rundir.append('resume', adopted=adopted, caught_up=0)
+                return
+        self.twin.reset(episode.index, episode.seed)
+        for done in episode.steps:
+            self.twin.step(int(done.action))
+        recorded = recorded_by_id.get(episode.reset_id)
+        pending = state.pending
+        if recording is not None and recorded is None:
+            # The recording lost the reset too: send it again, then every journaled step.
+            answer = self.chamber.reset(episode.reset_id, episode.seed)
+            if answer.info:
+                raise RunnerError(f'resume: the chamber refused the reset of episode '
+                                  f'{episode.index + 1} again: {answer.info}')
+            self.observation = answer.observation
+            caught_up = self._catch_up(episode, 0)
+        elif recorded is not None:
+            last = recorded[-1]
+            known = len(episode.steps)
+            if last.step > known + 1 or (last.step == known + 1 and pending is None):
+                raise RunnerError(f'resume: the recording holds step {last.step} of episode '
+                                  f'{episode.index + 1} but the journal knows {known} steps and '
+                                  f'no step in progress: the run directory is not this '
+                                  f"recording's.")
+            if last.step == known + 1:  # answered before the crash: adopt, never resend
+                action = int(pending['action'])
+                self._complete(episode, last.step, last.step_id, action, Answer(
+                    '', last.reward, last.terminated, last.truncated, last.step,
+                    last.observation))
+                adopted.append(f'step {last.step}')
+            elif last.step < known:  # the recording lost steps: re-simulate them into it
+                caught_up = self._catch_up(episode, last.step)
+            else:
+                self.observation = last.observation
+        self.rundir.append('resume', adopted=adopted, caught_up=caught_up)
+        self.say(f'resumed episode {episode.index + 1} after step '
+                 f'{len(self.rundir.state.current.steps) if self.rundir.state.current else "end"}'
+                 + (f'; adopted from the recording: {", ".join(adopted)}' if adopted else '')
+                 + (f'; {caught_up} step(s) re-simulated into the recording' if caught_up
+                    else ''))
+
+    def _catch_up(self, episode: Any, after: int) -> int:
+        """Send the journaled steps after ``after`` again to a resumed simulator (their state was
+        lost with the recording's tail) and check each reward bit for bit."""
+        if not isinstance(self.chamber, SimChamber):
+            raise RunnerError(f"resume: the chamber's recording lacks steps {after + 1}.."
+                              f'{len(episode.steps)} of episode {episode.index + 1} that the '
+                              f'journal holds; only a simulator can redo them.')
+        count = 0
+        for done in episode.steps[after:]:
+            answer = self.chamber.step(episode.reset_id, done.step_id, int(done.action))
+            same = np.float64(answer.reward).tobytes() == np.float64(done.reward).tobytes()
+            if answer.info or not same:
+                raise RunnerError(f'resume: re-simulating step {done.step} of episode '
+                                  f'{episode.index + 1} gave {answer.info or answer.reward!r}, '
+                                  f'the journal holds reward {done.reward!r}.')
+            self.observation = answer.observation
+            count += 1
+        return count
+
+
+# ---------------------------------------------------------------------- chambers over the bridge
+class _LinkChamber:
+    """The ``ChamberLink`` side shared by both chambers."""
+
+    recording: Path | None = None
+
+    def __init__(self, settings: RunSettings, namespace: str) -> None:
+        self.settings = settings
+        self.namespace = namespace
+        self.link: Any = None
+        self._transport: Any = None
+
+    def _connect(self, liveness: Any = None) -> None:
+        from growspace_gym_bridge.link import ChamberLink
+        from growspace_sim.node.rclpy_transport import RclpyTransport
+
+        name = f'growspace_rig_{os.getpid()}_{secrets.token_hex(3)}'
+        self._transport = RclpyTransport(name, self.namespace)
+        self.link = ChamberLink(self._transport, with_state=False, liveness=liveness)
+        self.link.connect(self.settings.step_timeout_s)
+
+    def reset(self, reset_id: int, seed: int) -> Answer:
+        reply = self.link.reset(reset_id, seed, self.settings.challenge, self.settings.setting,
+                                self.settings.step_timeout_s)
+        return _answer(reply)
+
+    def step(self, reset_id: int, step_id: int, action: int) -> Answer:
+        return _answer(self.link.step(reset_id, step_id, self.settings.step_timeout_s,
+                                      action=action))
+
+    def close(self) -> None:
+        transport, self._transport, self.link = self._transport, None, None
+        if transport is not None:
+            transport.close()
+
+
+def _answer(reply: Any) -> Answer:
+    result = reply.result
+    image = None if reply.image is None else np.array(convert.image_from_msg(reply.image))
+    return Answer(str(result.info), float(result.reward), bool(result.terminated),
+                  bool(result.truncated), int(result.step), image)
+
+
+class SimChamber(_LinkChamber):
+    """``sim_node`` started by the runner, recording into the run directory (split)."""
+
+    def __init__(self, settings: RunSettings, recording: Path) -> None:
+        super().__init__(settings, settings.namespace or
+                         f'/growspace_rig_{os.getpid()}_{secrets.token_hex(3)}')
+        self.recording = recording
+        self.node: Any = None
+
+    def prepare(self) -> None:
+        from growspace_sim.recording import repair, split_files, wait_until_free
+
+        if not self.recording.is_dir():
+            return
+        # A node whose runner died stops by itself and finishes its file first.
+        if not wait_until_free(self.recording, self.settings.step_timeout_s):
+            raise RunnerError(f'{self.recording} is still being recorded by another '
+                              f'process after {self.settings.step_timeout_s:g} s; is a '
+                              f'runner of this run still going?')
+        repair(self.recording)
+        if not split_files(self.recording):  # a crash before its first file: keep it aside
+            os.replace(self.recording, self.recording.with_name(
+                f'{self.recording.name}.empty-{secrets.token_hex(3)}'))
+
+    def start(self, resume: bool) -> None:
+        from growspace_gym_bridge.errors import NodeDied
+        from growspace_gym_bridge.process import NodeProcess
+        from growspace_sim.ros import loopback
+
+        loopback.confine()  # our own node and our side of it stay on loopback
+        params: dict[str, Any] = {
+            'challenge': self.settings.challenge, 'setting': self.settings.setting,
+            'mode': 'lockstep', 'seed': self.settings.seed,
+            'record_path': str(self.recording),
+            'record_max_bytes': self.settings.record_max_bytes,
+            'record_max_duration_s': float(self.settings.record_max_duration_s)}
+        if resume and self.recording.is_dir():
+            params['resume_path'] = str(self.recording)  # prepare() left its files readable
+        if not (params['record_max_bytes'] or params['record_max_duration_s'] or
+                'resume_path' in params):
+            params['record_max_duration_s'] = 1e9  # always a split directory, never one file
+        self.node = NodeProcess(self.namespace, params)
+
+        def liveness(describe: Callable[[], str]) -> None:
+            code = self.node.poll()
+            if code is not None:
+                raise NodeDied(self.namespace, code, self.node.stderr_tail(), describe())
+        self._connect(liveness)
+
+    def close(self) -> None:
+        super().close()
+        if self.node is not None:
+            self.node.stop()  # SIGTERM: the node finishes its recording file
+
+
+class AttachedChamber(_LinkChamber):
+    """A running lockstep chamber (``sim_node``, or ``gantry_node`` with ``camera_node``).
+
+    The runner cannot read its recording (the node writes it where it was told), so a resume
+    goes on from the journal alone: a step in progress at the crash is sent again.
+    """
+
+    def prepare(self) -> None:
+        pass
+
+    def start(self, resume: bool) -> None:
+        from growspace_sim.ros import loopback
+
+        loopback.confine()
+        self._connect()
+
+
+def make_chamber(rundir: RunDir) -> RigChamber:
+    """The chamber of a run's settings."""
+    if rundir.settings.chamber == 'sim':
+        return SimChamber(rundir.settings, rundir.recording_path)
+    return AttachedChamber(rundir.settings, rundir.settings.namespace)
+
+
+__all__ = ['Answer', 'AttachedChamber', 'RESET_ID_BASE', 'RigChamber', 'RunDirError', 'Runner',
+           'RunnerError', 'SimChamber', 'make_chamber', 'recorded_episodes', 'reset_id_of']
