@@ -1,0 +1,133 @@
+"""The run directory and its journal (pure, files only), the progress line, the CLI's errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+
+import pytest
+
+from growspace_sim.recording import RecordingError, repair, SplitRecorder, wait_until_free
+from growspace_sim.rig.cli import main as rig_main
+from growspace_sim.rig.rundir import (
+    format_progress, read_journal, RunDir, RunDirError, RunSettings)
+
+UTC = dt.UTC
+
+
+def _journal_steps(run: RunDir, episode: int, steps: range) -> None:
+    for step in steps:
+        run.append('intent', episode=episode, step=step, step_id=step, action=1)
+        run.append('step', episode=episode, step=step, step_id=step, action=1, reward=0.5,
+                   terminated=False, truncated=step == 50)
+
+
+def test_create_writes_settings_once_and_never_reuses_a_directory(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings(episodes=3, seed=10))
+    saved = json.loads((tmp_path / 'run' / 'run.json').read_text())
+    assert saved['episodes'] == 3 and saved['created'].endswith('Z')
+    assert saved['namespace'].startswith('/growspace_rig_')  # fixed for the run's life
+    assert RunDir(tmp_path / 'run').settings == run.settings
+    with pytest.raises(RunDirError, match='exists already; `growspace-rig resume'):
+        RunDir.create(tmp_path / 'run', RunSettings())
+    with pytest.raises(RunDirError, match='not a run directory'):
+        RunDir(tmp_path)
+
+
+@pytest.mark.parametrize('field, value, allowed', [
+    ('episodes', 0, 'an integer >= 1'), ('policy', 'greedy', 'one of oracle'),
+    ('chamber', 'rig', 'one of sim, attach'), ('step_period_s', -1.0, '>= 0'),
+    ('step_timeout_s', 0.0, '> 0'), ('seed', -2, 'an integer >= 0'),
+    ('policy_path', '', 'needs the path')])
+def test_bad_settings_name_the_field_value_and_what_is_allowed(field, value, allowed):
+    base = RunSettings(policy='replay', policy_path='x.mcap') if field == 'policy_path' \
+        else RunSettings()
+    values = {**dataclasses.asdict(base), field: value}
+    with pytest.raises(RunDirError, match=rf'{field} = {value!r} is not allowed; .*{allowed}'):
+        RunSettings(**values)
+
+
+def test_journal_holds_completed_steps_and_the_one_in_progress(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings(episodes=2))
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    _journal_steps(run, 0, range(1, 4))
+    run.append('intent', episode=0, step=4, step_id=4, action=2)
+    state = read_journal(run.journal_path)
+    assert state == run.state  # what is on disk is what the runner believes
+    assert [s.step for s in state.current.steps] == [1, 2, 3]
+    assert state.pending['step'] == 4 and state.steps_done == 3 and state.duplicated == 0
+
+
+def test_a_line_cut_short_by_a_crash_is_no_event_and_is_cut_before_the_next(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings())
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    _journal_steps(run, 0, range(1, 3))
+    with open(run.journal_path, 'a') as stream:
+        stream.write('{"event":"step","episode":0,"st')  # the crash came mid-write
+    again = RunDir(tmp_path / 'run')
+    assert len(again.state.current.steps) == 2 and not again.state.torn
+    again.append('note', text='after the crash')
+    assert read_journal(again.journal_path).events == again.state.events
+
+
+def test_a_damaged_line_inside_the_journal_is_an_error_naming_it(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings())
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    text = run.journal_path.read_text()
+    run.journal_path.write_text('garbage\n' + text)
+    with pytest.raises(RunDirError, match=r'journal.jsonl:1: not a journal event'):
+        RunDir(tmp_path / 'run')
+
+
+def test_a_step_journaled_twice_is_counted_not_hidden(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings())
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    _journal_steps(run, 0, range(1, 3))
+    _journal_steps(run, 0, range(2, 3))
+    assert read_journal(run.journal_path).duplicated == 1
+
+
+def test_progress_line_says_step_k_of_n_next_step_time_and_eta(tmp_path):
+    run = RunDir.create(tmp_path / 'run', RunSettings(episodes=2, step_period_s=3600.0))
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    _journal_steps(run, 0, range(1, 18))
+    now = dt.datetime(2026, 11, 28, 12, 0, tzinfo=UTC)
+    line = format_progress(run.settings, run.state, 50, now, now + dt.timedelta(hours=1), 60.0)
+    # 83 steps left: the next at 13:00, then 82 more an hour apart, the last taking 60 s.
+    assert line == ('episode 1/2 step 17/50 | 17/100 steps done | next step 13:00:00 UTC | '
+                    'ETA 2026-12-01 23:01:00 UTC')
+    _journal_steps(run, 0, range(18, 51))
+    run.append('reset', episode=1, reset_id=12, seed=1)
+    _journal_steps(run, 1, range(1, 51))
+    assert format_progress(run.settings, run.state, 50, now, None, 60.0) == \
+        'episode 2/2 step 50/50 | 100/100 steps done | finished'
+
+
+def test_cli_errors_name_the_argument_value_and_what_is_allowed(tmp_path, capsys):
+    assert rig_main(['run', str(tmp_path / 'a'), '--episodes', '0']) == 2
+    assert capsys.readouterr().err.strip() == ('growspace-rig: error: argument --episodes: '
+                                               'episodes = 0 is not allowed; an integer >= 1.')
+    assert rig_main(['run', str(tmp_path / 'b'), '--chamber', 'attach']) == 2
+    assert 'argument --namespace' in capsys.readouterr().err
+    assert rig_main(['resume', str(tmp_path / 'none')]) == 2
+    assert 'is not a run directory' in capsys.readouterr().err
+    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()
+
+
+def test_status_reads_the_journal_without_a_chamber(tmp_path, capsys):
+    run = RunDir.create(tmp_path / 'run', RunSettings(episodes=1))
+    run.append('reset', episode=0, reset_id=11, seed=0)
+    _journal_steps(run, 0, range(1, 6))
+    assert rig_main(['status', str(tmp_path / 'run')]) == 1  # not finished
+    assert 'episode 1/1 step 5/50 | 5/50 steps done' in capsys.readouterr().out
+
+
+def test_a_split_recording_being_written_is_locked_against_a_second_writer(tmp_path):
+    with SplitRecorder(tmp_path / 'rec'):
+        with pytest.raises(RecordingError, match='being recorded by another process'):
+            SplitRecorder(tmp_path / 'rec', append=True)
+        with pytest.raises(RecordingError, match='being recorded by another process'):
+            repair(tmp_path / 'rec')
+        assert not wait_until_free(tmp_path / 'rec', 0.0)
+    assert wait_until_free(tmp_path / 'rec', 0.0)
