@@ -121,3 +121,15 @@ def test_sigkill_mid_episode_then_resume_runs_every_step_exactly_once(tmp_path, 
         assert resumed[0]['caught_up'] == lost
     assert 'finished: 2 episode(s)' in out
     _check_every_step_once(run, expected_rewards)
+
+
+def test_soak_script_injects_faults_and_loses_nothing(tmp_path):
+    """scripts/soak_rig.py, short: 100 steps, 4 faults, each followed by a resume."""
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[1] / 'scripts'
+                                              / 'soak_rig.py'), '--steps', '100', '--faults',
+                          '4', '--seed', '5', '--out', str(tmp_path / 'soak')],
+                         capture_output=True, text=True, timeout=2 * TIMEOUT_S)
+    assert out.returncode == 0, out.stdout + out.stderr
+    last = out.stdout.strip().splitlines()[-1]
+    assert last.startswith('soak: steps=100 faults=4 resumes=4 lost=0 duplicated=0 '
+                           'unreadable_files=0 max_resume_s='), last

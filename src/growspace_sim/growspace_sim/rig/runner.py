@@ -45,7 +45,7 @@ import numpy as np
 from growspace_sim.core.config import SimConfig
 from growspace_sim.rig.policies import make_policy, Twin
 from growspace_sim.rig.rundir import format_progress, RunDir, RunDirError, RunSettings
-from growspace_sim.ros import convert
+from growspace_sim.ros import convert, types
 
 RESET_ID_BASE = 1 << 20  # episode i is reset with reset_id RESET_ID_BASE + i + 1 (the node's
 # own start-up episode is reset_id 0; a fixed id lets a resume find the episode in a recording)
@@ -72,9 +72,9 @@ class RigChamber(Protocol):
 
     recording: Path | None  # where its recording is, if the runner can read it
 
-    def prepare(self) -> None:
+    def prepare(self) -> dict[int, list[RecordedStep]]:
         """Before a resume: make the recording readable (its writer gone, a damaged last file
-        repaired)."""
+        repaired) and return what it holds (``recorded_episodes``; empty without one)."""
 
     def start(self, resume: bool) -> None: ...
 
@@ -117,6 +117,8 @@ def recorded_episodes(path: Path | None) -> dict[int, list[RecordedStep]]:
         return {}
     out = {}
     with Bag(path) as bag:
+        if not any(i.typename == types.STEP_RESULT for i in bag.topics.values()):
+            return {}  # every message lost (a power cut before its first chunk)
         for episode in read_episodes(bag):
             out[episode.reset_id] = [RecordedStep(
                 int(r.result.step), int(r.result.step_id), float(r.result.reward),
@@ -170,8 +172,7 @@ class Runner:
         resuming = state.events > 0 or (recording is not None and recording.exists())
         recorded: dict[int, list[RecordedStep]] = {}
         if resuming:
-            self.chamber.prepare()  # the chamber's recording finished and repaired
-            recorded = recorded_episodes(recording)
+            recorded = self.chamber.prepare()  # its recording finished, repaired and read
         self.chamber.start(resume=resuming)
         if resuming:
             self.reconcile(recorded)
@@ -400,20 +401,25 @@ class SimChamber(_LinkChamber):
         self.recording = recording
         self.node: Any = None
 
-    def prepare(self) -> None:
-        from growspace_sim.recording import repair, split_files, wait_until_free
+    def prepare(self) -> dict[int, list[RecordedStep]]:
+        from growspace_sim.recording import repair, wait_until_free
 
         if not self.recording.is_dir():
-            return
+            return {}
         # A node whose runner died stops by itself and finishes its file first.
         if not wait_until_free(self.recording, self.settings.step_timeout_s):
             raise RunnerError(f'{self.recording} is still being recorded by another '
                               f'process after {self.settings.step_timeout_s:g} s; is a '
                               f'runner of this run still going?')
         repair(self.recording)
-        if not split_files(self.recording):  # a crash before its first file: keep it aside
+        recorded = recorded_episodes(self.recording)
+        if not recorded:
+            # Nothing of an episode survived (a crash before its first chunk reached the disk):
+            # sim_node cannot resume from it. Kept aside, never deleted; the journal's steps
+            # are re-simulated into a new recording.
             os.replace(self.recording, self.recording.with_name(
-                f'{self.recording.name}.empty-{secrets.token_hex(3)}'))
+                f'{self.recording.name}.unusable-{secrets.token_hex(3)}'))
+        return recorded
 
     def start(self, resume: bool) -> None:
         from growspace_gym_bridge.errors import NodeDied
@@ -453,8 +459,8 @@ class AttachedChamber(_LinkChamber):
     goes on from the journal alone: a step in progress at the crash is sent again.
     """
 
-    def prepare(self) -> None:
-        pass
+    def prepare(self) -> dict[int, list[RecordedStep]]:
+        return {}
 
     def start(self, resume: bool) -> None:
         from growspace_sim.ros import loopback
