@@ -131,3 +131,59 @@ def test_a_split_recording_being_written_is_locked_against_a_second_writer(tmp_p
             repair(tmp_path / 'rec')
         assert not wait_until_free(tmp_path / 'rec', 0.0)
     assert wait_until_free(tmp_path / 'rec', 0.0)
+
+
+class _FakeRig:
+    """A chamber without ROS for the loop's logic: its own twin answers; chosen ids refused."""
+
+    recording = None
+
+    def __init__(self, refuse: set[int]) -> None:
+        from growspace_sim.core.config import SimConfig
+        from growspace_sim.rig.policies import Twin
+
+        self.twin = Twin(SimConfig())
+        self.refuse = refuse
+        self.sent: list[int] = []
+
+    def prepare(self):
+        return {}
+
+    def start(self, resume: bool) -> None:
+        pass
+
+    def reset(self, reset_id: int, seed: int):
+        from growspace_sim.rig.runner import Answer
+
+        self.twin.reset(0, seed)
+        return Answer('', observation=self.twin.sim.observe())
+
+    def step(self, reset_id: int, step_id: int, action: int):
+        from growspace_sim.rig.runner import Answer
+
+        self.sent.append(step_id)
+        if step_id in self.refuse:  # what gantry_node answers in alarm
+            return Answer('error: gantry not ready: the controller is in alarm (ALARM:1)')
+        outcome = self.twin.step(action)
+        return Answer('', outcome.reward, False, outcome.truncated, self.twin.chamber.steps,
+                      self.twin.sim.observe())
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_refused_step_asks_for_a_person_and_is_retried_with_a_new_step_id(tmp_path):
+    from growspace_sim.rig.runner import Runner
+
+    run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
+                                                      namespace='/rig', retry_period_s=30.0))
+    chamber, said, slept = _FakeRig(refuse={3, 4}), [], []
+    Runner(run, chamber, say=said.append, sleep=slept.append).run()
+    assert slept == [30.0, 30.0]  # waited twice, for a person, then went on
+    waiting = [line for line in said if line.startswith('WAITING FOR A PERSON')]
+    assert len(waiting) == 2 and 'ALARM:1' in waiting[0] and 'gantry/unlock' in waiting[0]
+    assert chamber.sent[:5] == [1, 2, 3, 4, 5]  # never an id twice
+    episode = read_journal(run.journal_path).episodes[0]
+    assert [s.step for s in episode.steps] == list(range(1, 51))
+    assert episode.steps[2].step_id == 5 and episode.steps[-1].truncated
+    assert 'finished' in said[-1]
