@@ -99,8 +99,13 @@ def test_sigkill_mid_episode_then_resume_runs_every_step_exactly_once(tmp_path, 
     if damage == 'step_not_journaled':
         # The runner died between the chamber's answer and its journal line: the recording
         # holds the step, the journal only its intent. Resume must adopt it, not send it again.
-        last_step = max(i for i, line in enumerate(lines) if '"event":"step"' in line)
-        journal.write_text(''.join(lines[:last_step]))
+        from growspace_sim.recording import wait_until_free
+        assert wait_until_free(run / 'recording', 60)
+        episode = read_journal(journal).episodes[-1]
+        last = recorded_episodes(run / 'recording')[episode.reset_id][-1].step
+        intent = next(i for i, line in enumerate(lines) if '"event":"intent"' in line
+                      and f'"step":{last},' in line and f'"episode":{episode.index},' in line)
+        journal.write_text(''.join(lines[:intent + 1]))
     elif damage == 'recording_tail_lost':
         # The chamber died before its last file reached the disk: the journal holds steps the
         # recording lacks. Resume must re-simulate them into the recording, once.

@@ -275,59 +275,74 @@ class Runner:
             RunnerError: They cannot agree (the recording holds steps the journal never
                 sent, or a re-simulated reward differs from the journaled one).
         """
+        adopted = self._adopt(recorded_by_id)
+        caught_up = self._fill(recorded_by_id) if self.chamber.recording is not None else 0
+        self.rundir.append('resume', adopted=adopted, caught_up=caught_up)
+        current = self.rundir.state.current
+        where = f'episode {current.index + 1} after step {len(current.steps)}' if current \
+            else 'between episodes'
+        self.say(f'resumed {where}'
+                 + (f'; adopted from the recording: {", ".join(adopted)}' if adopted else '')
+                 + (f'; {caught_up} step(s) re-simulated into the recording' if caught_up
+                    else ''))
+
+    def _adopt(self, recorded_by_id: dict[int, list[RecordedStep]]) -> list[str]:
+        """Journal what the chamber did that the journal lacks (a reset, or the step in
+        progress), from its recording; set the twin to the journal's last step."""
         state = self.rundir.state
-        recording = self.chamber.recording
-        adopted, caught_up = [], 0
+        adopted: list[str] = []
         episode = state.current
         if episode is None:  # between episodes: was the next reset answered already?
             index = state.episodes[-1].index + 1 if state.episodes else 0
-            if index < self.settings.episodes and recording is not None:
-                if recorded_by_id.get(reset_id_of(index)):
-                    self.twin.reset(index, self.settings.episode_seed(index))
-                    self.rundir.append('reset', episode=index, reset_id=reset_id_of(index),
-                                       seed=self.settings.episode_seed(index))
-                    adopted.append('reset')
-                    episode = self.rundir.state.current
+            if index < self.settings.episodes and recorded_by_id.get(reset_id_of(index)):
+                seed = self.settings.episode_seed(index)
+                self.rundir.append('reset', episode=index, reset_id=reset_id_of(index),
+                                   seed=seed)
+                adopted.append(f'the reset of episode {index + 1}')
+                episode = self.rundir.state.current
             if episode is None:
-                self.rundir.append('resume', adopted=adopted, caught_up=0)
-                return
+                return adopted
         self.twin.reset(episode.index, episode.seed)
         for done in episode.steps:
             self.twin.step(int(done.action))
         recorded = recorded_by_id.get(episode.reset_id)
-        pending = state.pending
-        if recording is not None and recorded is None:
-            # The recording lost the reset too: send it again, then every journaled step.
-            answer = self.chamber.reset(episode.reset_id, episode.seed)
-            if answer.info:
-                raise RunnerError(f'resume: the chamber refused the reset of episode '
-                                  f'{episode.index + 1} again: {answer.info}')
-            self.observation = answer.observation
-            caught_up = self._catch_up(episode, 0)
-        elif recorded is not None:
-            last = recorded[-1]
-            known = len(episode.steps)
-            if last.step > known + 1 or (last.step == known + 1 and pending is None):
-                raise RunnerError(f'resume: the recording holds step {last.step} of episode '
-                                  f'{episode.index + 1} but the journal knows {known} steps and '
-                                  f'no step in progress: the run directory is not this '
-                                  f"recording's.")
-            if last.step == known + 1:  # answered before the crash: adopt, never resend
-                action = int(pending['action'])
-                self._complete(episode, last.step, last.step_id, action, Answer(
-                    '', last.reward, last.terminated, last.truncated, last.step,
-                    last.observation))
-                adopted.append(f'step {last.step}')
-            elif last.step < known:  # the recording lost steps: re-simulate them into it
-                caught_up = self._catch_up(episode, last.step)
+        if not recorded:
+            return adopted
+        last, known, pending = recorded[-1], len(episode.steps), state.pending
+        if last.step > known + 1 or (last.step == known + 1 and pending is None):
+            raise RunnerError(f'resume: the recording holds step {last.step} of episode '
+                              f'{episode.index + 1} but the journal knows {known} steps and '
+                              f"no step in progress: this recording is not the run's.")
+        if last.step == known + 1:  # answered before the crash: adopt, never resend
+            self._complete(episode, last.step, last.step_id, int(pending['action']), Answer(
+                '', last.reward, last.terminated, last.truncated, last.step,
+                last.observation))
+            adopted.append(f'step {last.step} of episode {episode.index + 1}')
+        elif last.step == known:
+            self.observation = last.observation
+        return adopted
+
+    def _fill(self, recorded_by_id: dict[int, list[RecordedStep]]) -> int:
+        """Re-simulate into the recording the journaled steps it lost (its last file cut short,
+        or set aside): from the last episode it holds, to the journal's end; a lost reset is
+        sent again. Every earlier file was finished, so nothing before that is missing."""
+        episodes = self.rundir.state.episodes
+        held = [i for i, e in enumerate(episodes) if recorded_by_id.get(e.reset_id)]
+        first = held[-1] if held else 0
+        count = 0
+        for episode in episodes[first:]:
+            recorded = recorded_by_id.get(episode.reset_id)
+            if recorded:
+                after = recorded[-1].step
             else:
-                self.observation = last.observation
-        self.rundir.append('resume', adopted=adopted, caught_up=caught_up)
-        self.say(f'resumed episode {episode.index + 1} after step '
-                 f'{len(self.rundir.state.current.steps) if self.rundir.state.current else "end"}'
-                 + (f'; adopted from the recording: {", ".join(adopted)}' if adopted else '')
-                 + (f'; {caught_up} step(s) re-simulated into the recording' if caught_up
-                    else ''))
+                answer = self.chamber.reset(episode.reset_id, episode.seed)
+                if answer.info:
+                    raise RunnerError(f'resume: the chamber refused the reset of episode '
+                                      f'{episode.index + 1} again: {answer.info}')
+                self.observation = answer.observation
+                after = 0
+            count += self._catch_up(episode, after)
+        return count
 
     def _catch_up(self, episode: Any, after: int) -> int:
         """Send the journaled steps after ``after`` again to a resumed simulator (their state was
