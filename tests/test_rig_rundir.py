@@ -137,6 +137,7 @@ class _FakeRig:
     """A chamber without ROS for the loop's logic: its own twin answers; chosen ids refused."""
 
     recording = None
+    simulated = False
 
     def __init__(self, refuse: set[int]) -> None:
         from growspace_sim.core.config import SimConfig

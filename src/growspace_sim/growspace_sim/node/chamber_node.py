@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterable
 import dataclasses
 import math
 import secrets
-from typing import Any, Protocol, TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.node.params import NodeParams, ParamError, as_values, build
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert
@@ -35,9 +36,6 @@ from growspace_sim.ros.interface import (
     COMMAND_QOS, INPUTS, METADATA_NAME, OBSERVATION_QOS, OUTPUTS, config_json,
     digit_fingerprint, growspace_metadata)
 from growspace_sim.simulation import Simulation
-
-if TYPE_CHECKING:
-    from growspace_sim.replay.resim import ResumePoint
 
 __all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'OBSERVATION_QOS', 'OUTPUTS',
            'Recorder']
@@ -146,14 +144,10 @@ class ChamberNode:
         self._reset(seed, cfg, reset_id=0)
 
     def _resume(self, point: ResumePoint) -> None:
-        """Go on where a recording ends: its last episode, after its last step.
+        """Go on after a recording's last step, re-simulated bit for bit (``resume_point``).
 
-        The state is the recording re-simulated bit for bit (``replay.resume_point``): the next
-        lockstep command (step_id above the recorded last) steps it as the recorded chamber
-        would have. Nothing of the re-simulation is published or recorded again, so a run
-        recorded across the restart holds every step once; only ``chamber/config`` (latched)
-        is published anew for clients that attach now, and not recorded (it announces nothing
-        new).
+        Nothing re-simulated is published or recorded again (a recording across the restart
+        holds every step once); only the latched ``chamber/config``, unrecorded, for clients.
         """
         self.sim, self.cfg = point.sim, point.sim.cfg
         self.outcome, self.seed = point.outcome, point.seed

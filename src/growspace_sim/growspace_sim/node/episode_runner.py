@@ -12,7 +12,7 @@ and ``docs/recording.md``).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, TYPE_CHECKING
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -22,12 +22,10 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.local import LocalTransport
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.node.params import DEFAULT_NODE_NAME, NodeParams
 from growspace_sim.ros import convert, types
 from growspace_sim.ros.names import DEFAULT_NAMESPACE
-
-if TYPE_CHECKING:
-    from growspace_sim.replay.resim import ResumePoint
 
 
 

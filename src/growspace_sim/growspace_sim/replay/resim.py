@@ -16,6 +16,7 @@ from growspace_sim.replay.episodes import COMPARED, Episode, StepRecord, read_ep
 from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.ros.interface import digit_fingerprint
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.simulation import Simulation
 
 
@@ -78,36 +79,6 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     with Bag(path) as bag:
         _replay(bag, namespace, digit_source, report, progress)
     return report
-
-
-@dataclasses.dataclass
-class ResumePoint:
-    """A chamber re-simulated to the last recorded step of a recording, ready to go on.
-
-    Attributes:
-        sim: The simulation, in the state the recorded chamber had after its last step.
-        outcome: The last step's (or the reset's) outcome.
-        seed: The seed of the last episode; None where it continued the random stream.
-        reset_id: The last episode's reset_id.
-        last_step_id: The highest step_id the chamber answered in it (lockstep).
-        sim_time_ns: The sim time of the last step [ns] (its StepResult's stamp).
-        episode_over: The last episode ended (truncated or terminated).
-        report: The check of every recorded step against the re-simulation.
-    """
-
-    sim: Simulation
-    outcome: Any
-    seed: int | None
-    reset_id: int
-    last_step_id: int
-    sim_time_ns: int
-    episode_over: bool
-    report: ResimReport
-
-    @property
-    def steps(self) -> int:
-        """Steps of the last episode done."""
-        return self.sim.chamber.steps
 
 
 def resume_point(path: str | os.PathLike, namespace: str | None = None, *,

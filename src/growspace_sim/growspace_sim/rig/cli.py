@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(rundir: RunDir, fail) -> int:
     from growspace_sim.recording import stop_on_signals
-    from growspace_sim.rig.runner import make_chamber, Runner, RunnerError
+    from growspace_sim.rig.chambers import make_chamber
+    from growspace_sim.rig.runner import Runner, RunnerError
 
     def say(line: str) -> None:
         print(line, flush=True)

@@ -1,8 +1,9 @@
 """The experiment runner: a policy drives a lockstep chamber for N episodes, and resumes.
 
 The loop (``Runner.run``) is written once against ``RigChamber``: ``reset(reset_id, seed)`` and
-``step(reset_id, step_id, action)`` answered by the chamber's ``step_result`` and image, over
-the bridge's ``ChamberLink`` (the same topics a Gymnasium agent uses):
+``step(reset_id, step_id, action)`` answered by the chamber's ``step_result`` and image; the
+chambers (``rig.chambers``) talk over the bridge's ``ChamberLink`` (the topics a Gymnasium
+agent uses):
 
 - ``SimChamber``: the runner starts ``sim_node`` (lockstep) recording into the run directory,
   split by size and duration; on resume it starts it again with ``resume_path`` on that
@@ -34,9 +35,7 @@ from __future__ import annotations
 from collections.abc import Callable
 import dataclasses
 import datetime as dt
-import os
 from pathlib import Path
-import secrets
 import time
 from typing import Any, Protocol
 
@@ -71,6 +70,8 @@ class RigChamber(Protocol):
     """A lockstep chamber the runner drives."""
 
     recording: Path | None  # where its recording is, if the runner can read it
+    # A simulator: it can redo a step bit for bit, and the twin must equal it.
+    simulated: bool
 
     def prepare(self) -> dict[int, list[RecordedStep]]:
         """Before a resume: make the recording readable (its writer gone, a damaged last file
@@ -232,13 +233,13 @@ class Runner:
                            action=action, reward=answer.reward, terminated=answer.terminated,
                            truncated=answer.truncated)
         self.observation = answer.observation
-        if isinstance(self.chamber, SimChamber) and outcome.reward != answer.reward:
+        if self.chamber.simulated and outcome.reward != answer.reward:
             # On sim_node the twin is the chamber bit for bit; a difference is a bug to report.
             self.rundir.append('note', text=f'episode {episode.index + 1} step {step}: the twin '
                                f'gave reward {outcome.reward!r}, the chamber {answer.reward!r}')
 
     def _refused(self, episode: Any, step: int, step_id: int, info: str) -> None:
-        if isinstance(self.chamber, SimChamber):
+        if self.chamber.simulated:
             raise RunnerError(f'sim_node refused step {step} of episode {episode.index + 1} '
                               f'(step_id {step_id}): {info}')
         text = (f'episode {episode.index + 1} step {step} was refused by the chamber: {info}. '
@@ -347,7 +348,7 @@ class Runner:
     def _catch_up(self, episode: Any, after: int) -> int:
         """Send the journaled steps after ``after`` again to a resumed simulator (their state was
         lost with the recording's tail) and check each reward bit for bit."""
-        if not isinstance(self.chamber, SimChamber):
+        if not self.chamber.simulated:
             raise RunnerError(f"resume: the chamber's recording lacks steps {after + 1}.."
                               f'{len(episode.steps)} of episode {episode.index + 1} that the '
                               f'journal holds; only a simulator can redo them.')
@@ -364,132 +365,5 @@ class Runner:
         return count
 
 
-# ---------------------------------------------------------------------- chambers over the bridge
-class _LinkChamber:
-    """The ``ChamberLink`` side shared by both chambers."""
-
-    recording: Path | None = None
-
-    def __init__(self, settings: RunSettings, namespace: str) -> None:
-        self.settings = settings
-        self.namespace = namespace
-        self.link: Any = None
-        self._transport: Any = None
-
-    def _connect(self, liveness: Any = None) -> None:
-        from growspace_gym_bridge.link import ChamberLink
-        from growspace_sim.node.rclpy_transport import RclpyTransport
-
-        name = f'growspace_rig_{os.getpid()}_{secrets.token_hex(3)}'
-        self._transport = RclpyTransport(name, self.namespace)
-        self.link = ChamberLink(self._transport, with_state=False, liveness=liveness)
-        self.link.connect(self.settings.step_timeout_s)
-
-    def reset(self, reset_id: int, seed: int) -> Answer:
-        reply = self.link.reset(reset_id, seed, self.settings.challenge, self.settings.setting,
-                                self.settings.step_timeout_s)
-        return _answer(reply)
-
-    def step(self, reset_id: int, step_id: int, action: int) -> Answer:
-        return _answer(self.link.step(reset_id, step_id, self.settings.step_timeout_s,
-                                      action=action))
-
-    def close(self) -> None:
-        transport, self._transport, self.link = self._transport, None, None
-        if transport is not None:
-            transport.close()
-
-
-def _answer(reply: Any) -> Answer:
-    result = reply.result
-    image = None if reply.image is None else np.array(convert.image_from_msg(reply.image))
-    return Answer(str(result.info), float(result.reward), bool(result.terminated),
-                  bool(result.truncated), int(result.step), image)
-
-
-class SimChamber(_LinkChamber):
-    """``sim_node`` started by the runner, recording into the run directory (split)."""
-
-    def __init__(self, settings: RunSettings, recording: Path) -> None:
-        super().__init__(settings, settings.namespace or
-                         f'/growspace_rig_{os.getpid()}_{secrets.token_hex(3)}')
-        self.recording = recording
-        self.node: Any = None
-
-    def prepare(self) -> dict[int, list[RecordedStep]]:
-        from growspace_sim.recording import repair, wait_until_free
-
-        if not self.recording.is_dir():
-            return {}
-        # A node whose runner died stops by itself and finishes its file first.
-        if not wait_until_free(self.recording, self.settings.step_timeout_s):
-            raise RunnerError(f'{self.recording} is still being recorded by another '
-                              f'process after {self.settings.step_timeout_s:g} s; is a '
-                              f'runner of this run still going?')
-        repair(self.recording)
-        recorded = recorded_episodes(self.recording)
-        if not recorded:
-            # Nothing of an episode survived (a crash before its first chunk reached the disk):
-            # sim_node cannot resume from it. Kept aside, never deleted; the journal's steps
-            # are re-simulated into a new recording.
-            os.replace(self.recording, self.recording.with_name(
-                f'{self.recording.name}.unusable-{secrets.token_hex(3)}'))
-        return recorded
-
-    def start(self, resume: bool) -> None:
-        from growspace_gym_bridge.errors import NodeDied
-        from growspace_gym_bridge.process import NodeProcess
-        from growspace_sim.ros import loopback
-
-        loopback.confine()  # our own node and our side of it stay on loopback
-        params: dict[str, Any] = {
-            'challenge': self.settings.challenge, 'setting': self.settings.setting,
-            'mode': 'lockstep', 'seed': self.settings.seed,
-            'record_path': str(self.recording),
-            'record_max_bytes': self.settings.record_max_bytes,
-            'record_max_duration_s': float(self.settings.record_max_duration_s)}
-        if resume and self.recording.is_dir():
-            params['resume_path'] = str(self.recording)  # prepare() left its files readable
-        if not (params['record_max_bytes'] or params['record_max_duration_s'] or
-                'resume_path' in params):
-            params['record_max_duration_s'] = 1e9  # always a split directory, never one file
-        self.node = NodeProcess(self.namespace, params)
-
-        def liveness(describe: Callable[[], str]) -> None:
-            code = self.node.poll()
-            if code is not None:
-                raise NodeDied(self.namespace, code, self.node.stderr_tail(), describe())
-        self._connect(liveness)
-
-    def close(self) -> None:
-        super().close()
-        if self.node is not None:
-            self.node.stop()  # SIGTERM: the node finishes its recording file
-
-
-class AttachedChamber(_LinkChamber):
-    """A running lockstep chamber (``sim_node``, or ``gantry_node`` with ``camera_node``).
-
-    The runner cannot read its recording (the node writes it where it was told), so a resume
-    goes on from the journal alone: a step in progress at the crash is sent again.
-    """
-
-    def prepare(self) -> dict[int, list[RecordedStep]]:
-        return {}
-
-    def start(self, resume: bool) -> None:
-        from growspace_sim.ros import loopback
-
-        loopback.confine()
-        self._connect()
-
-
-def make_chamber(rundir: RunDir) -> RigChamber:
-    """The chamber of a run's settings."""
-    if rundir.settings.chamber == 'sim':
-        return SimChamber(rundir.settings, rundir.recording_path)
-    return AttachedChamber(rundir.settings, rundir.settings.namespace)
-
-
-__all__ = ['Answer', 'AttachedChamber', 'RESET_ID_BASE', 'RigChamber', 'RunDirError', 'Runner',
-           'RunnerError', 'SimChamber', 'make_chamber', 'recorded_episodes', 'reset_id_of']
+__all__ = ['Answer', 'RESET_ID_BASE', 'RigChamber', 'RunDirError', 'Runner', 'RunnerError',
+           'recorded_episodes', 'reset_id_of']
