@@ -138,3 +138,27 @@ def test_soak_script_injects_faults_and_loses_nothing(tmp_path):
     last = out.stdout.strip().splitlines()[-1]
     assert last.startswith('soak: steps=100 faults=4 resumes=4 lost=0 duplicated=0 '
                            'unreadable_files=0 max_resume_s='), last
+
+
+def test_attached_to_a_running_sim_node_the_runner_steps_it_and_its_recording_holds_it(
+        tmp_path, expected_rewards):
+    """--chamber attach: the same loop on a lockstep chamber someone else started."""
+    from ros_helpers import NodeProcess
+
+    node = NodeProcess('-p', f'seed:={SEED}', '-p', f'record_path:={tmp_path / "node.mcap"}',
+                       namespace='/rig_attach')
+    try:
+        out = subprocess.run(_rig('run', str(tmp_path / 'run'), '--chamber', 'attach',
+                                  '--namespace', '/rig_attach', '--episodes', '1', '--seed',
+                                  str(SEED), '--step-timeout', '60'),
+                             capture_output=True, text=True, timeout=TIMEOUT_S)
+    finally:
+        code, log = node.stop()
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert 'episode 1/1 step 50/50 | 50/50 steps done | finished' in out.stdout
+    episode = read_journal(tmp_path / 'run' / 'journal.jsonl').episodes[0]
+    rewards = np.array([s.reward for s in episode.steps])
+    assert rewards.tobytes() == np.array(expected_rewards[0]).tobytes()
+    with Bag(tmp_path / 'node.mcap') as bag:
+        ours = [e for e in read_episodes(bag) if e.reset_id == reset_id_of(0)]
+    assert [int(s.result.step) for s in ours[0].stepped] == list(range(1, 51))
