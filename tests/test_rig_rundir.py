@@ -146,6 +146,7 @@ class _FakeRig:
         self.twin = Twin(SimConfig())
         self.refuse = refuse
         self.sent: list[int] = []
+        self.last_id = 0
 
     def prepare(self):
         return {}
@@ -164,7 +165,12 @@ class _FakeRig:
 
         self.sent.append(step_id)
         if step_id in self.refuse:  # what gantry_node answers in alarm
-            return Answer('error: gantry not ready: the controller is in alarm (ALARM:1)')
+            return Answer('error: gantry not ready: the controller is in alarm (ALARM:1)',
+                          step=self.twin.chamber.steps)
+        if step_id <= self.last_id:  # the lockstep rule of sim_node and gantry_node
+            return Answer(f'error: step_id = {step_id} is a duplicate or late command',
+                          step=self.twin.chamber.steps)
+        self.last_id = step_id
         outcome = self.twin.step(action)
         return Answer('', outcome.reward, False, outcome.truncated, self.twin.chamber.steps,
                       self.twin.sim.observe())
@@ -188,3 +194,35 @@ def test_a_refused_step_asks_for_a_person_and_is_retried_with_a_new_step_id(tmp_
     assert [s.step for s in episode.steps] == list(range(1, 51))
     assert episode.steps[2].step_id == 5 and episode.steps[-1].truncated
     assert 'finished' in said[-1]
+
+
+@pytest.mark.parametrize('chamber_did_it', [True, False])
+def test_resume_on_an_attached_chamber_never_repeats_the_step_in_progress(tmp_path,
+                                                                          chamber_did_it):
+    """The runner died after journaling step 4's intent; the chamber (alive) had done it, or
+    never got it. Resent with its own step_id: done once either way."""
+    from growspace_sim.rig.policies import RandomPolicy
+    from growspace_sim.rig.runner import reset_id_of, Runner
+
+    run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
+                                                      namespace='/rig', seed=4))
+    chamber, policy = _FakeRig(refuse=set()), RandomPolicy(4)
+    chamber.reset(reset_id_of(0), 4)
+    run.append('reset', episode=0, reset_id=reset_id_of(0), seed=4)
+    chamber.twin.episode = 0
+    for step in range(1, 5):
+        action = policy.act(None, chamber.twin)
+        run.append('intent', episode=0, step=step, step_id=step, action=action)
+        if step < 4 or chamber_did_it:
+            answer = chamber.step(reset_id_of(0), step, action)
+        if step < 4:
+            run.append('step', episode=0, step=step, step_id=step, action=action,
+                       reward=answer.reward, terminated=False, truncated=False)
+    resumed = RunDir(tmp_path / 'run')
+    Runner(resumed, chamber, say=lambda line: None, sleep=lambda s: None).run()
+    assert chamber.twin.chamber.steps == 50  # the chamber stepped 50 times, no more
+    state = read_journal(resumed.journal_path)
+    assert [s.step for s in state.episodes[0].steps] == list(range(1, 51))
+    assert state.duplicated == 0
+    lost = [s.step for s in state.episodes[0].steps if s.reward != s.reward]  # NaN
+    assert lost == ([4] if chamber_did_it else [])

@@ -131,7 +131,8 @@ class AttachedChamber(_LinkChamber):
     """A running lockstep chamber (``sim_node``, or ``gantry_node`` with ``camera_node``).
 
     The runner cannot read its recording (the node writes it where it was told), so a resume
-    goes on from the journal alone: a step in progress at the crash is sent again.
+    goes on from the journal alone: a step in progress at the crash is resent with its own
+    step_id, which a chamber that did it refuses as a duplicate (``Runner._step``).
     """
 
     def prepare(self) -> dict[int, list[RecordedStep]]:

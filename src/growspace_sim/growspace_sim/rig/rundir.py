@@ -243,8 +243,9 @@ def _apply(state: JournalState, event: dict[str, Any]) -> None:
         state.pending = event
     elif kind == 'step':
         episode = next(e for e in reversed(state.episodes) if e.index == int(event['episode']))
+        reward = event['reward']  # null: the answer was lost (the chamber's recording has it)
         done = StepDone(int(event['step']), int(event['step_id']), event['action'],
-                        float(event['reward']), bool(event['terminated']),
+                        math.nan if reward is None else float(reward), bool(event['terminated']),
                         bool(event['truncated']))
         if any(s.step == done.step for s in episode.steps):
             state.duplicated += 1
@@ -321,6 +322,8 @@ class RunDir:
                 acting without the journal would lose the step.
         """
         record = {'event': event, 't': utc_now(), **fields}
+        if isinstance(record.get('reward'), float) and math.isnan(record['reward']):
+            record['reward'] = None  # JSON has no NaN
         line = json.dumps(record, separators=(',', ':')) + '\n'
         try:
             fd = os.open(self.journal_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)

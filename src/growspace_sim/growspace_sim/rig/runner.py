@@ -23,11 +23,13 @@ runner knows; ``reconcile`` makes them agree before the next step:
 - a reset the chamber answered but the journal lacks is adopted the same way.
 
 Each step gets a new step_id (never one sent before), so the chamber's lockstep rule refuses any
-late duplicate. Where the chamber refuses a step (an attached gantry in alarm or e-stop: a
-person must clear it), the runner says so, waits ``retry_period_s`` and tries again with a new
-step_id. Hook for the rig's growth period and photoperiod (``gantry_node`` ``growth_s``, built
-separately): the runner only needs the step's answer, so a gantry step that lasts hours needs
-no change here beyond ``step_timeout_s`` covering it.
+late duplicate; the one exception, a step in progress at the crash resent to an attached
+chamber, keeps its own id for that very reason. Where the chamber refuses a step (an attached
+gantry in alarm or e-stop: a person must clear it), the runner says so, waits
+``retry_period_s`` and tries again with a new step_id. Hook for the rig's growth period and
+photoperiod (``gantry_node`` ``growth_s``, built separately): the runner only needs the step's
+answer, so a gantry step that lasts hours needs no change here beyond ``step_timeout_s``
+covering it.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from __future__ import annotations
 from collections.abc import Callable
 import dataclasses
 import datetime as dt
+import math
 from pathlib import Path
 import time
 from typing import Any, Protocol
@@ -156,6 +159,7 @@ class Runner:
         self._step_seconds: float | None = None
         self._next_at: dt.datetime | None = None
         self._sent_ids: dict[int, int] = {}  # reset_id -> highest step_id sent or journaled
+        self._resend_pending = False  # after resuming an attached chamber (see _step)
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> None:
@@ -202,18 +206,34 @@ class Runner:
     def _step(self, episode: Any) -> None:
         self._wait_for_step_time()
         step = len(episode.steps) + 1
-        step_id = self._new_step_id(episode)
         pending = self.rundir.state.pending
-        # A step in progress at a crash that reconcile could not place is redone with its
-        # journaled action (the same one the policy gives; kept for a policy that is not).
-        action = int(pending['action']) if pending and int(pending['step']) == step \
-            and int(pending['episode']) == episode.index else \
+        if not (pending and int(pending['step']) == step
+                and int(pending['episode']) == episode.index):
+            pending = None
+        # A step in progress at a crash is redone with its journaled action (the same one the
+        # policy gives; kept for a policy that is not). Right after resuming an attached
+        # chamber, with its own step_id: a chamber that did it refuses it as a duplicate.
+        resend = pending is not None and self._resend_pending
+        self._resend_pending = False
+        step_id = int(pending['step_id']) if resend else self._new_step_id(episode)
+        action = int(pending['action']) if pending else \
             int(self.policy.act(self.observation, self.twin))
         started = time.monotonic()
         self._next_at = None
-        self.rundir.append('intent', episode=episode.index, step=step, step_id=step_id,
-                           action=action)
+        if not resend:
+            self.rundir.append('intent', episode=episode.index, step=step, step_id=step_id,
+                               action=action)
         answer = self.chamber.step(episode.reset_id, step_id, action)
+        if answer.info and resend and answer.step == step:
+            # The chamber had done it (its step count says so) and refused the duplicate: the
+            # step happened once; its answer was lost with the runner (it is in the chamber's
+            # recording). Journaled without a reward; the next action sees the last photo.
+            self._complete(episode, step, step_id, action,
+                           Answer('', math.nan, truncated=step >= self.cfg.episode_length))
+            self.rundir.append('note', text=f'episode {episode.index + 1} step {step} was done '
+                               f'by the chamber before the crash; its answer was lost (see the '
+                               f"chamber's recording, step_id {step_id}).")
+            return
         if answer.info:
             self._refused(episode, step, step_id, answer.info)
             return
@@ -276,6 +296,7 @@ class Runner:
             RunnerError: They cannot agree (the recording holds steps the journal never
                 sent, or a re-simulated reward differs from the journaled one).
         """
+        self._resend_pending = self.chamber.recording is None
         adopted = self._adopt(recorded_by_id)
         caught_up = self._fill(recorded_by_id) if self.chamber.recording is not None else 0
         self.rundir.append('resume', adopted=adopted, caught_up=caught_up)
