@@ -226,3 +226,39 @@ def test_resume_on_an_attached_chamber_never_repeats_the_step_in_progress(tmp_pa
     assert state.duplicated == 0
     lost = [s.step for s in state.episodes[0].steps if s.reward != s.reward]  # NaN
     assert lost == ([4] if chamber_did_it else [])
+
+
+def test_the_step_period_holds_across_a_resume_and_a_schedule_can_hold_a_step(tmp_path):
+    from growspace_sim.rig.runner import reset_id_of, Runner
+
+    run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
+                                                      namespace='/rig', step_period_s=3600.0))
+    chamber = _FakeRig(refuse=set())
+    chamber.reset(reset_id_of(0), 0)
+    run.append('reset', episode=0, reset_id=reset_id_of(0), seed=0)
+    # A step begun at 10:00 and answered; the runner then died. Resumed at 10:10.
+    with open(run.journal_path, 'a') as stream:
+        stream.write('{"event":"intent","t":"2026-11-28T10:00:00Z","episode":0,"step":1,'
+                     '"step_id":1,"action":0}\n')
+    chamber.step(reset_id_of(0), 1, 0)
+    run = RunDir(tmp_path / 'run')
+    clock = [dt.datetime(2026, 11, 28, 10, 10, tzinfo=UTC)]
+    slept: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        slept.append(seconds)
+        clock[0] += dt.timedelta(seconds=seconds)
+
+    def lights_on_at_six(at: dt.datetime) -> dt.datetime:  # a night from 20:00 to 06:00
+        if at.hour >= 20:
+            return (at + dt.timedelta(days=1)).replace(hour=6, minute=0, second=0)
+        return at
+
+    said: list[str] = []
+    runner = Runner(run, chamber, say=said.append, clock=lambda: clock[0], sleep=sleep,
+                    not_before=lights_on_at_six)
+    runner.run()
+    assert slept[0] == 50 * 60  # step 2 one hour after step 1 began, not at once
+    assert slept[1:9] == [3600.0] * 8  # then one an hour: 12:00, ..., 19:00
+    night = [line for line in said if line.startswith('the schedule holds')]
+    assert night and night[0].endswith('06:00:00 UTC')

@@ -174,6 +174,7 @@ class JournalState:
     Attributes:
         episodes: Every episode whose reset was answered, in order.
         pending: The last ``intent`` without its ``step`` (a step in progress at a crash).
+        last_intent_t: When the last step was begun: a resume keeps the step period from it.
         duplicated: Steps journaled twice (must stay 0; counted, never hidden).
         events: Lines read (torn lines excluded).
         torn: A last line cut short by a crash was ignored.
@@ -181,6 +182,7 @@ class JournalState:
 
     episodes: list[EpisodeState] = dataclasses.field(default_factory=list)
     pending: dict[str, Any] | None = None
+    last_intent_t: str | None = None  # when the last step was begun (UTC, ISO 8601)
     duplicated: int = 0
     events: int = 0
     torn: bool = False
@@ -241,6 +243,7 @@ def _apply(state: JournalState, event: dict[str, Any]) -> None:
         state.pending = None
     elif kind == 'intent':
         state.pending = event
+        state.last_intent_t = event.get('t')
     elif kind == 'step':
         episode = next(e for e in reversed(state.episodes) if e.index == int(event['episode']))
         reward = event['reward']  # null: the answer was lost (the chamber's recording has it)

@@ -89,6 +89,11 @@ class RigChamber(Protocol):
     def close(self) -> None: ...
 
 
+def _utc(text: str) -> dt.datetime:
+    """A journal time (ISO 8601, ``Z``) as an aware datetime."""
+    return dt.datetime.fromisoformat(text.replace('Z', '+00:00'))
+
+
 def reset_id_of(episode: int) -> int:
     """The reset_id episode ``episode`` (0-based) is sent with."""
     return RESET_ID_BASE + episode + 1
@@ -140,11 +145,15 @@ class Runner:
         say: Where the progress lines go (one line per step, and what a person must do).
         clock: UTC now (tests replace it).
         sleep: Waits [s] (tests replace it).
+        not_before: The hook for a schedule beyond the step period: given when a step would
+            start (UTC), the earliest it may (e.g. the next lights-on of a photoperiod, so a
+            step never runs into the night). None: the step period alone.
     """
 
     def __init__(self, rundir: RunDir, chamber: RigChamber, say: Callable[[str], None] = print,
                  clock: Callable[[], dt.datetime] | None = None,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 sleep: Callable[[float], None] = time.sleep,
+                 not_before: Callable[[dt.datetime], dt.datetime] | None = None) -> None:
         self.rundir = rundir
         self.settings: RunSettings = rundir.settings
         self.chamber = chamber
@@ -160,6 +169,7 @@ class Runner:
         self._next_at: dt.datetime | None = None
         self._sent_ids: dict[int, int] = {}  # reset_id -> highest step_id sent or journaled
         self._resend_pending = False  # after resuming an attached chamber (see _step)
+        self.not_before = not_before
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> None:
@@ -181,6 +191,9 @@ class Runner:
         self.chamber.start(resume=resuming)
         if resuming:
             self.reconcile(recorded)
+            begun = self.rundir.state.last_intent_t
+            if begun:  # the period holds across a restart
+                self._next_at = _utc(begun) + dt.timedelta(seconds=self.settings.step_period_s)
         while True:
             state = self.rundir.state
             episode = state.current
@@ -204,7 +217,6 @@ class Runner:
         self.observation = answer.observation
 
     def _step(self, episode: Any) -> None:
-        self._wait_for_step_time()
         step = len(episode.steps) + 1
         pending = self.rundir.state.pending
         if not (pending and int(pending['step']) == step
@@ -215,11 +227,14 @@ class Runner:
         # chamber, with its own step_id: a chamber that did it refuses it as a duplicate.
         resend = pending is not None and self._resend_pending
         self._resend_pending = False
+        if not resend:  # a resent step was due when it was first begun
+            self._wait_for_step_time()
         step_id = int(pending['step_id']) if resend else self._new_step_id(episode)
         action = int(pending['action']) if pending else \
             int(self.policy.act(self.observation, self.twin))
-        started = time.monotonic()
-        self._next_at = None
+        started = _utc(pending['t']) if resend and pending.get('t') else self.clock()
+        # The period counts from a step's start (a resent one: when it was first begun).
+        self._next_at = started + dt.timedelta(seconds=self.settings.step_period_s)
         if not resend:
             self.rundir.append('intent', episode=episode.index, step=step, step_id=step_id,
                                action=action)
@@ -238,11 +253,9 @@ class Runner:
             self._refused(episode, step, step_id, answer.info)
             return
         self._complete(episode, step, step_id, action, answer)
-        elapsed = time.monotonic() - started
+        elapsed = (self.clock() - started).total_seconds()
         self._step_seconds = elapsed if self._step_seconds is None else \
             0.8 * self._step_seconds + 0.2 * elapsed
-        self._next_at = self.clock() + dt.timedelta(
-            seconds=max(0.0, self.settings.step_period_s - elapsed))
         self.say(format_progress(self.settings, self.rundir.state, self.cfg.episode_length,
                                  self.clock(), self._next_at, self._step_seconds))
 
@@ -269,6 +282,7 @@ class Runner:
         self.rundir.append('note', text=text)
         self.say(f'WAITING FOR A PERSON: {text}')
         self.sleep(self.settings.retry_period_s)
+        self._next_at = None  # the retry goes as soon as the retry period is over
 
     def _new_step_id(self, episode: Any) -> int:
         pending = self.rundir.state.pending
@@ -278,9 +292,14 @@ class Runner:
         return used + 1
 
     def _wait_for_step_time(self) -> None:
-        if self._next_at is None:
-            return
-        remaining = (self._next_at - self.clock()).total_seconds()
+        now = self.clock()
+        at = max(self._next_at or now, now)
+        if self.not_before is not None:
+            scheduled, at = at, max(at, self.not_before(at))
+            if at > scheduled:
+                self.say(f'the schedule holds the next step until '
+                         f'{at.astimezone(dt.UTC):%Y-%m-%d %H:%M:%S} UTC')
+        remaining = (at - now).total_seconds()
         if remaining > 0:
             self.sleep(remaining)
 
