@@ -112,7 +112,10 @@ def test_cli_errors_name_the_argument_value_and_what_is_allowed(tmp_path, capsys
     assert 'argument --namespace' in capsys.readouterr().err
     assert rig_main(['resume', str(tmp_path / 'none')]) == 2
     assert 'is not a run directory' in capsys.readouterr().err
-    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()
+    assert rig_main(['run', str(tmp_path / 'c'), '--policy', 'replay', '--policy-path',
+                     str(tmp_path / 'missing.mcap')]) == 2
+    assert "argument --policy-path: '" in capsys.readouterr().err
+    assert not any((tmp_path / name).exists() for name in 'abc')
 
 
 def test_status_reads_the_journal_without_a_chamber(tmp_path, capsys):
@@ -262,3 +265,24 @@ def test_the_step_period_holds_across_a_resume_and_a_schedule_can_hold_a_step(tm
     assert slept[1:9] == [3600.0] * 8  # then one an hour: 12:00, ..., 19:00
     night = [line for line in said if line.startswith('the schedule holds')]
     assert night and night[0].endswith('06:00:00 UTC')
+
+
+def test_the_replay_policy_plays_a_recordings_actions_step_by_step(tmp_path):
+    from pathlib import Path
+
+    from growspace_sim.replay import Bag, read_episodes
+    from growspace_sim.rig.runner import Runner
+
+    sample = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_easy.mcap'
+    with Bag(sample) as bag:
+        recorded = read_episodes(bag)[0]
+        seed = recorded.seed
+    run = RunDir.create(tmp_path / 'run', RunSettings(
+        policy='replay', policy_path=str(sample), chamber='attach', namespace='/rig',
+        seed=seed))
+    Runner(run, _FakeRig(refuse=set()), say=lambda line: None, sleep=lambda s: None).run()
+    episode = read_journal(run.journal_path).episodes[0]
+    assert [s.action for s in episode.steps] == \
+        [int(r.commands[0].action) for r in recorded.stepped]
+    # The fake chamber is the simulator: the recorded rewards come back bit for bit.
+    assert [s.reward for s in episode.steps] == [float(r.result.reward) for r in recorded.stepped]

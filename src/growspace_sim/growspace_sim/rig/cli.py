@@ -92,6 +92,15 @@ def main(argv: list[str] | None = None) -> int:
                 SimConfig(challenge=settings.challenge, setting=settings.setting)
             except ValueError as e:
                 return fail(2, f'argument --challenge/--setting: {e}')
+            if settings.policy_path:  # read it now: a bad path creates no run directory
+                from growspace_sim.replay import ReplayError
+                from growspace_sim.rig.policies import make_policy
+
+                try:
+                    make_policy(settings.policy, settings.policy_path, settings.seed)
+                except (ValueError, ReplayError, OSError) as e:
+                    return fail(2, f'argument --policy-path: {settings.policy_path!r} cannot '
+                                   f'be used as a {settings.policy} policy: {e}')
             rundir = RunDir.create(args.run_dir, settings)
         else:
             rundir = RunDir(args.run_dir)
