@@ -51,6 +51,11 @@ WHERE = [
     (r'^growspace-camera ', RUN),
     (r'^python -m growspace_sim\.tools\.pub ', RUN),
     (r'^growspace-replay ', RUN),
+    (r'^growspace-rig run .*--chamber attach ', 'needs a running lockstep chamber (the rig): '
+                                               'tests/test_rig_run.py runs sim_node instead'),
+    (r'^growspace-rig (run|resume|status) runs/exp1', 'covered: tests/test_rig_run.py runs '
+                                                     '`run`, SIGKILL, `resume` on sim_node; '
+                                                     'tests/test_rig_rundir.py `status`'),
     (r'^(growspace-sweep .*--address HEAD_IP|export RAY_AUTH_MODE|ray |mkdir -p ~/\.ray |'
      r'RAY_ARGS=|\(umask 077 && ray get-auth-token|ssh OTHER )',
      'the cluster recipe needs machines (walked by hand on two namespaced nodes: README); '

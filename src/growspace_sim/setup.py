@@ -36,6 +36,7 @@ setup(
             'growspace-demo = growspace_sim.tools.demo:main',
             'growspace-record = growspace_sim.tools.record:main',
             'growspace-replay = growspace_sim.replay:main',
+            'growspace-rig = growspace_sim.rig.cli:main',
             'sim_node = growspace_sim.node.main:main',
             'teleop = growspace_sim.tools.teleop:main',
             'view_node = growspace_sim.node.view_node:main',

@@ -97,6 +97,16 @@ def existing_file(text: str) -> str:
     return text
 
 
+def recording(text: str) -> str:
+    """A ``type=`` for a recording to read: an MCAP file, or a split recording's folder."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f'{text!r}: no such file or folder')
+    if not (path.is_file() or path.is_dir()):
+        raise argparse.ArgumentTypeError(f'{text!r} is neither a file nor a folder')
+    return text
+
+
 def new_file(text: str) -> str:
     """A ``type=`` for a file to write: the folder it goes in must exist and be writable.
 

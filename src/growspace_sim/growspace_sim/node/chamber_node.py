@@ -27,6 +27,7 @@ from growspace_sim.core import task as tasks
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.node.params import NodeParams, ParamError, as_values, build
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert
@@ -98,11 +99,14 @@ class ChamberNode:
         digit_source: where shape targets come from (see ``growspace_sim.digits``).
         on_reconfigure: called with the new configuration when a reset changed it (the
             rclpy node then shows the new challenge and setting in its parameters).
+        resume: start where a recording ends (``replay.resume_point``) instead of with a
+            new episode; its configuration replaces ``cfg``.
     """
 
     def __init__(self, transport: Transport, cfg: SimConfig, params: NodeParams | None = None,
                  recorder: Recorder | None = None, digit_source: str = 'auto',
-                 on_reconfigure: Callable[[SimConfig], None] | None = None) -> None:
+                 on_reconfigure: Callable[[SimConfig], None] | None = None,
+                 resume: ResumePoint | None = None) -> None:
         self.transport = transport
         self.log = transport.logger
         self.params = params or NodeParams()
@@ -132,9 +136,31 @@ class ChamberNode:
         transport.serve(types.RESET, 'reset', self.on_reset_service)
         self._timer = transport.create_timer(1.0 / self.params.rate_hz, self.tick) \
             if self.params.mode == 'realtime' else None
+        if resume is not None:
+            self._resume(resume)
+            return
         seed = self.params.seed if self.params.seed >= 0 else secrets.randbits(63)
         self._start_recording(seed)
         self._reset(seed, cfg, reset_id=0)
+
+    def _resume(self, point: ResumePoint) -> None:
+        """Go on after a recording's last step, re-simulated bit for bit (``resume_point``).
+
+        Nothing re-simulated is published or recorded again (a recording across the restart
+        holds every step once); only the latched ``chamber/config``, unrecorded, for clients.
+        """
+        self.sim, self.cfg = point.sim, point.sim.cfg
+        self.outcome, self.seed = point.outcome, point.seed
+        self.reset_id, self.last_step_id = point.reset_id, point.last_step_id
+        self.episode_over = point.episode_over
+        self.sim_time_ns = self._log_ns = point.sim_time_ns
+        self._start_recording(point.seed if point.seed is not None else -1)
+        if self.on_reconfigure is not None:
+            self.on_reconfigure(self.cfg)
+        self._pubs['config'](types.new(types.STRING, data=self.config_payload(point.seed)))
+        self.log.info(f'resumed episode {self.sim.episode} (reset_id {self.reset_id}) after '
+                      f'step {self.sim.chamber.steps} (step_id {self.last_step_id}): the next '
+                      f'command steps {self.sim.chamber.steps + 1}.')
 
     # --- inputs --------------------------------------------------------------------------
 

@@ -22,6 +22,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
 from growspace_sim.node.chamber_node import ChamberNode, Recorder
 from growspace_sim.node.local import LocalTransport
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.node.params import DEFAULT_NODE_NAME, NodeParams
 from growspace_sim.ros import convert, types
 from growspace_sim.ros.names import DEFAULT_NAMESPACE
@@ -134,6 +135,26 @@ class EpisodeRunner:
         self._step_id = 0
         return self.observation, self._info()
 
+    def resume(self, point: ResumePoint) -> np.ndarray:
+        """Start the node where a recording ends (``replay.resume_point``), not with a reset.
+
+        The next ``step`` sends the step_id after the recorded last one, in the recorded
+        episode, as a client that never stopped would.
+
+        Returns:
+            The observation after the recorded last step (re-simulated).
+
+        Raises:
+            RuntimeError: The node runs already.
+        """
+        if self.node is not None:
+            raise RuntimeError('resume() starts the node; it runs already.')
+        self.node = ChamberNode(self.transport, self.cfg, self.params, self.recorder,
+                                self.digit_source, resume=point)
+        self._reset_id, self._step_id = point.reset_id, point.last_step_id
+        self.observation = point.sim.observe()
+        return self.observation
+
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Send one discrete action as a lockstep LightCommand; the node steps once.
 
@@ -170,7 +191,7 @@ class EpisodeRunner:
 
     def _send(self, topic: str, msg: Any) -> None:
         """Deliver a request to the node and take its answer (the StepResult it published)."""
-        previous = self.transport.latest[self._result_topic]
+        previous = self.transport.latest.get(self._result_topic)  # none yet after resume()
         self.transport.inject(topic, msg)
         result = self.transport.latest[self._result_topic]
         if result is previous or result.info:

@@ -48,8 +48,15 @@ CLOSE_TIMEOUT_S = 10.0  # closing longer than this is a hang: stacks to stderr, 
 log = logging.getLogger('growspace_sim.sim_node')
 
 
-def make_recorder(path: str) -> Recorder | None:
+def make_recorder(path: str, max_bytes: int = 0, max_duration_s: float = 0.0,
+                  append: bool = False) -> Recorder | None:
     """The MCAP recorder of ``record_path``, or None when it is empty.
+
+    Args:
+        path: ``record_path``: a file, or with a limit a split recording's directory.
+        max_bytes: ``record_max_bytes`` (0 = no size limit).
+        max_duration_s: ``record_max_duration_s`` (0 = no duration limit).
+        append: Continue an existing split recording (a resumed run) with a new file.
 
     Raises:
         ParamError: the recorder is unavailable or the file cannot be created.
@@ -57,13 +64,36 @@ def make_recorder(path: str) -> Recorder | None:
     if not path:
         return None
     try:
-        from growspace_sim.recording import McapRecorder, RecordingError
+        from growspace_sim.recording import McapRecorder, RecordingError, SplitRecorder
     except ImportError as e:
         raise ParamError(f'record_path = {path!r} needs growspace_sim.recording: {e}') from None
     try:
+        if max_bytes or max_duration_s or append:
+            return SplitRecorder(path, max_bytes=max_bytes, max_duration_s=max_duration_s,
+                                 append=append)
         return McapRecorder(path)
     except RecordingError as e:  # exists already (never overwritten), no directory, no space
         raise ParamError(f'record_path = {path!r} cannot be written: {e}') from None
+
+
+def load_resume_point(path: str) -> Any:
+    """``resume_path``: the recording re-simulated to its last step (a damaged last file of a
+    split recording is repaired first), or None when it is empty.
+
+    Raises:
+        ParamError: the recording cannot be read or does not re-simulate bit for bit.
+    """
+    if not path:
+        return None
+    from growspace_sim.recording import is_split_recording, RecordingError, repair
+    from growspace_sim.replay import ReplayError, resume_point
+
+    try:
+        if is_split_recording(path):
+            repair(path)
+        return resume_point(path)
+    except (ReplayError, RecordingError, OSError) as e:
+        raise ParamError(f'resume_path = {path!r} cannot be resumed: {e}') from None
 
 
 def installed_executable() -> str:
@@ -233,10 +263,14 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
                                   f'{unknown}: not parameters of sim_node (a typo?); '
                                   f'config/growspace.yaml lists them all.')
         cfg, node_params = params.build(values)
-        recorder = make_recorder(node_params.record_path)
+        resume = load_resume_point(node_params.resume_path)  # before a new split file opens
+        same = bool(resume) and os.path.abspath(node_params.resume_path) == os.path.abspath(
+            node_params.record_path)
+        recorder = make_recorder(node_params.record_path, node_params.record_max_bytes,
+                                 node_params.record_max_duration_s, append=same)
         show = transport.show_parameters  # the challenge parameters follow a reset's switch
         node = ChamberNode(transport, cfg, node_params, recorder, on_reconfigure=lambda c: show(
-            {'challenge': c.challenge, 'setting': c.setting}))
+            {'challenge': c.challenge, 'setting': c.setting}), resume=resume)
         transport.on_parameter_change(node.propose)
         transport.logger.info(
             f'sim_node {transport.resolve("~")}: {node_params.mode} mode, seed {node.seed}'

@@ -72,6 +72,17 @@ class NodeParams:
     frame_id: str = frame_param('chamber', 'frame of plant state, light state and step results')
     image_frame_id: str = frame_param('chamber_camera', 'frame of the camera images')
     record_path: str = param('', 'MCAP file to record every message to; empty = no recording')
+    record_max_bytes: int = param(0, 'split the recording into files of about this many message '
+                                  'bytes: record_path is then a directory of NAME_0.mcap, '
+                                  'NAME_1.mcap, ... (rosbag2 --max-bag-size); 0 = one file',
+                                  unit='B', bounds=Bounds(0, 10**15, integer=True))
+    record_max_duration_s: float = param(0.0, 'split the recording into files of at most this '
+                                         'much sim time each (rosbag2 --max-bag-duration); '
+                                         '0 = no duration limit', unit='s', bounds=Bounds(0.0))
+    resume_path: str = param('', 'go on where this recording (a file or a split directory) '
+                             'ends: its last episode re-simulated bit for bit to its last step, '
+                             'the next command steps the one after; the same split directory '
+                             'as record_path continues it with a new file; empty = a new episode')
 
     def __post_init__(self) -> None:
         check(self)

@@ -22,16 +22,25 @@ Example:
         ch = rec.add_channel('/growspace/step_result', types.STEP_RESULT, qos.DEFAULT)
         rec.write(ch, types.serialize(msg, types.STEP_RESULT), t_ns, t_ns)
 
+A long run is split into files by size and duration (``SplitRecorder``, rosbag2's
+``--max-bag-size`` / ``--max-bag-duration`` layout: ``NAME/NAME_0.mcap``, ``NAME_1.mcap``, ...,
+``metadata.yaml``); ``replay.Bag`` reads such a directory as one recording.
+
 Modules: ``recorder`` (``McapRecorder``, signals, exit), ``chunk_writer`` (the byte-level MCAP
-writer) and ``recovery`` (``recover``).
+writer), ``recovery`` (``recover``) and ``splits`` (``SplitRecorder``, ``repair``).
 """
 
 from growspace_sim.recording.recorder import (
     CHUNK_SIZE, FLUSH_PERIOD_S, LIBRARY, McapRecorder, PROFILE, RecordingError, stop_on_signals)
 from growspace_sim.recording.recovery import recover, RecoveryReport
+from growspace_sim.recording.splits import (
+    is_split_recording, repair, RepairReport, split_files, split_path, SplitRecorder,
+    wait_until_free)
 from growspace_sim.ros.interface import (  # noqa: F401 - re-exported: part of the file format
     FORMAT, METADATA_NAME, config_dict, config_json, digit_fingerprint, growspace_metadata)
 
 __all__ = ['CHUNK_SIZE', 'FLUSH_PERIOD_S', 'FORMAT', 'LIBRARY', 'McapRecorder', 'METADATA_NAME',
            'PROFILE', 'RecordingError', 'RecoveryReport', 'config_dict', 'config_json',
-           'digit_fingerprint', 'growspace_metadata', 'recover', 'stop_on_signals']
+           'RepairReport', 'SplitRecorder', 'digit_fingerprint', 'growspace_metadata',
+           'is_split_recording', 'recover', 'repair', 'split_files', 'split_path',
+           'stop_on_signals', 'wait_until_free']

@@ -14,7 +14,10 @@
 - ``compare A B``: the applied light of B against A, matched by episode and step_id, max and
   RMS per field (a simulated run and the same commands replayed onto the LED gantry);
 - ``recover BAG OUT``: copy every readable chunk of a file cut short by a crash or damaged,
-  and say what was skipped.
+  and say what was skipped; ``recover DIR`` repairs a split recording's last file in place.
+
+BAG is a ``.mcap`` file or a split recording's directory (``recording.SplitRecorder``): its files
+read as one.
 
 An unreadable chunk never stops a reader: it is skipped and named (``Bag.damage``).
 
@@ -34,9 +37,10 @@ from growspace_sim.replay.episodes import (
     Episode, StepRecord, format_summary, read_episodes, summary)
 from growspace_sim.replay.export import export_episode
 from growspace_sim.replay.play import play, play_steps, StepReplay
-from growspace_sim.replay.resim import COMPARED, Mismatch, ResimReport, resimulate
+from growspace_sim.replay.resim import (
+    COMPARED, Mismatch, ResimReport, resimulate, resume_point, ResumePoint)
 
 __all__ = ['Bag', 'BagMessage', 'COMPARED', 'Comparison', 'Episode', 'Mismatch', 'ReplayError',
-           'ResimReport', 'StepRecord', 'StepReplay', 'TopicInfo', 'compare', 'export_episode',
-           'format_comparison', 'format_summary', 'main', 'play', 'play_steps', 'read_episodes',
-           'resimulate', 'summary']
+           'ResimReport', 'ResumePoint', 'StepRecord', 'StepReplay', 'TopicInfo', 'compare',
+           'export_episode', 'format_comparison', 'format_summary', 'main', 'play',
+           'play_steps', 'read_episodes', 'resimulate', 'resume_point', 'summary']

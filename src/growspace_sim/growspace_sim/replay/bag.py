@@ -13,6 +13,7 @@ from mcap.records import Message
 from growspace_sim.recording import PROFILE
 from growspace_sim.recording.scan import (
     Damage, damage_from_metadata, McapScan, RECOVERY_METADATA)
+from growspace_sim.recording.splits import split_files
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import TOPICS
 
@@ -51,8 +52,12 @@ class Bag:
     A chunk that cannot be read (CRC mismatch, decompression error, bad record) does not stop
     the reading: ``messages`` skips it, adds it to ``damage`` and calls ``on_damage``.
 
+    A split recording (a directory of ``NAME_<i>.mcap`` files, ``recording.SplitRecorder``) reads
+    as one: its files' messages in file order, one after the other; topics and message counts
+    over all files; each metadata record as the first file holds it (the run's start).
+
     Args:
-        path: The ``.mcap`` file.
+        path: The ``.mcap`` file, or a split recording's directory.
         on_damage: Called with each unreadable part of the file as reading meets it.
 
     Raises:
@@ -67,10 +72,12 @@ class Bag:
         self.path = Path(path)
         self.on_damage = on_damage
         self.damage: list[Damage] = []  # what reading has skipped so far
+        self._parts: list[Bag] = []
         if not self.path.exists():
             raise ReplayError(f'No recording at {self.path}: the file does not exist.')
         if self.path.is_dir():
-            raise ReplayError(f'{self.path} is a directory; give the path of a .mcap file.')
+            self._open_split()
+            return
         try:
             self._stream = open(self.path, 'rb')
         except OSError as e:
@@ -119,12 +126,56 @@ class Bag:
             except ValueError as e:
                 self._lost([Damage(0, 0, 'metadata', str(e))])
 
+    def _open_split(self) -> None:
+        """Open every file of a split recording (``path`` is its directory)."""
+        files = split_files(self.path)
+        if not files:
+            raise ReplayError(f'{self.path} is a directory without recording files '
+                              f'({self.path.name}_0.mcap, ...); give a .mcap file or a split '
+                              f'recording.')
+        forward = self._lost
+        try:
+            for file in files:  # damage is named with its file: offsets are per file
+                self._parts.append(Bag(file, on_damage=lambda part, name=file.name: forward(
+                    [dataclasses.replace(part, what=f'{part.what} of {name}')])))
+        except ReplayError as e:
+            self.close()
+            incomplete = 'incomplete' in str(e)
+            raise ReplayError(
+                f'{e}' + (f' In a split recording, `growspace-replay recover {self.path}` '
+                          f'repairs its last file in place.' if incomplete else '')) from e
+        self.summary = None
+        self.topics = {}
+        for part in self._parts:
+            for topic, info in part.topics.items():
+                known = self.topics.get(topic)
+                self.topics[topic] = info if known is None else dataclasses.replace(
+                    known, count=known.count + info.count)
+        self.metadata = {}
+        for part in self._parts:
+            for name, data in part.metadata.items():
+                self.metadata.setdefault(name, data)
+
+    @property
+    def files(self) -> list[Path]:
+        """The recording's files (one, or a split recording's in order)."""
+        return [part.path for part in self._parts] if self._parts else [self.path]
+
+    @property
+    def size_bytes(self) -> int:
+        """Bytes on disk over all its files."""
+        return sum(f.stat().st_size for f in self.files)
+
     @property
     def start_time(self) -> int:
+        if self._parts:
+            return min((p.start_time for p in self._parts if p.end_time), default=0)
         return self.summary.statistics.message_start_time if self.summary.statistics else 0
 
     @property
     def end_time(self) -> int:
+        if self._parts:
+            return max((p.end_time for p in self._parts), default=0)
         return self.summary.statistics.message_end_time if self.summary.statistics else 0
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
@@ -133,6 +184,10 @@ class Bag:
         Args:
             topics: Only these topics; None = all.
         """
+        if self._parts:
+            for part in self._parts:
+                yield from part.messages(topics)
+            return
         wanted = None if topics is None else set(topics)
         scan = McapScan(self._stream, self.summary.chunk_indexes)
         reported = 0
@@ -194,7 +249,11 @@ class Bag:
         return out
 
     def close(self) -> None:
-        self._stream.close()
+        for part in self._parts:
+            part.close()
+        stream = getattr(self, '_stream', None)
+        if stream is not None:
+            stream.close()
 
     def __enter__(self) -> Bag:
         return self

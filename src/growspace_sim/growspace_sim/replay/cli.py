@@ -28,17 +28,17 @@ def build_parser() -> argparse.ArgumentParser:
                'DIR` draws what the camera saw on each (docs/recording.md).')
     sub = parser.add_subparsers(dest='command', required=True)
     p_info = sub.add_parser('info', help='episodes, returns, steps and duration')
-    p_info.add_argument('bag', type=arguments.existing_file)
+    p_info.add_argument('bag', type=arguments.recording)
     p_info.add_argument('--namespace', type=arguments.namespace)
     p_info.add_argument('--json', action='store_true', help='print JSON instead of a table')
     p_check = sub.add_parser('check', help='re-simulate and compare bit for bit')
-    p_check.add_argument('bag', type=arguments.existing_file)
+    p_check.add_argument('bag', type=arguments.recording)
     p_check.add_argument('--namespace', type=arguments.namespace)
     p_check.add_argument('--digit-source', choices=DIGIT_SOURCES,
                          help='override the recorded one')
     p_export = sub.add_parser('export', help='one episode to GIF or MP4; with --view, a copy '
                               'of the recording with the view added')
-    p_export.add_argument('bag', type=arguments.existing_file)
+    p_export.add_argument('bag', type=arguments.recording)
     p_export.add_argument('out', type=arguments.new_file, help='.gif or .mp4; .mcap with --view')
     p_export.add_argument('--view', action='store_true',
                           help='write OUT.mcap: every message, plus plant/markers and '
@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_export.add_argument('--overwrite', action='store_true')
     p_play = sub.add_parser('play', help='republish on the topics over ROS 2; with '
                             '--step-period, step by step onto a lockstep node (the gantry)')
-    p_play.add_argument('bag', type=arguments.existing_file)
+    p_play.add_argument('bag', type=arguments.recording)
     speed = p_play.add_mutually_exclusive_group()
     speed.add_argument('--rate', type=arguments.number(0, low_open=True), default=1.0,
                        help='speed factor (1 = original)')
@@ -89,16 +89,17 @@ def build_parser() -> argparse.ArgumentParser:
                        help='the chamber namespace in the recording')
     p_compare = sub.add_parser('compare', help='applied light of B against A, step by step '
                                                '(e.g. a simulated run and its gantry replay)')
-    p_compare.add_argument('a', type=arguments.existing_file, help='the reference recording')
-    p_compare.add_argument('b', type=arguments.existing_file,
+    p_compare.add_argument('a', type=arguments.recording, help='the reference recording')
+    p_compare.add_argument('b', type=arguments.recording,
                            help='the recording to compare with it')
     p_compare.add_argument('--namespace-a', type=arguments.namespace)
     p_compare.add_argument('--namespace-b', type=arguments.namespace)
     p_compare.add_argument('--tolerance-mm', type=arguments.number(0),
                            help='exit 1 if any field of B is farther than this from A')
-    p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file')
-    p_recover.add_argument('bag', type=arguments.existing_file)
-    p_recover.add_argument('out', type=arguments.new_file)
+    p_recover = sub.add_parser('recover', help='copy the readable chunks of a damaged file '
+                               'into OUT; a split recording directory: its last file, in place')
+    p_recover.add_argument('bag', type=arguments.recording)
+    p_recover.add_argument('out', nargs='?', type=arguments.new_file)
     return parser
 
 
@@ -171,7 +172,22 @@ def main(argv: list[str] | None = None) -> int:
             if args.tolerance_mm is not None and not result.within(args.tolerance_mm / 1e3):
                 print(f'OUT OF TOLERANCE: a field differs by more than {args.tolerance_mm} mm')
                 return 1
+        elif args.command == 'recover' and recording.is_split_recording(args.bag):
+            if args.out is not None:
+                parser.error(f'out = {args.out!r}: a split recording ({args.bag}) is repaired '
+                             f'in place; give no OUT.')
+            fixed = recording.repair(args.bag)
+            if fixed.damaged is None:
+                print(f'{args.bag}: every file is complete; nothing to recover')
+            elif fixed.path is None:
+                print(f'{args.bag}: moved unreadable {fixed.damaged.name} aside ({fixed.reason})')
+            else:
+                print(f'recovered {fixed.messages} messages into {fixed.path} ({fixed.reason}); '
+                      f'the damaged original is {fixed.damaged}')
         elif args.command == 'recover':
+            if args.out is None:
+                parser.error(f'out: required for a single file ({args.bag}); only a split '
+                             f'recording directory is repaired in place.')
             rep = recording.recover(args.bag, args.out)
             state = 'file was complete' if rep.complete else f'stopped at byte {rep.stopped_at}' \
                 f'{": " + rep.reason if rep.reason else ""}'

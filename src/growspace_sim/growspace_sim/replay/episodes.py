@@ -217,7 +217,8 @@ def summary(path: str | os.PathLike, namespace: str | None = None) -> dict[str, 
         meta = bag.metadata.get(METADATA_NAME, {})
         return {
             'path': str(bag.path),
-            'size_bytes': bag.path.stat().st_size,
+            'size_bytes': bag.size_bytes,
+            'files': [f.name for f in bag.files],
             'version': meta.get('version', ''),
             'seed': meta.get('seed', ''),
             'mode': meta.get('mode', ''),
@@ -243,7 +244,8 @@ def summary(path: str | os.PathLike, namespace: str | None = None) -> dict[str, 
 
 
 def format_summary(info: dict[str, Any]) -> str:
-    lines = [f'{info["path"]}: {info["size_bytes"]} B, {info["duration_s"]:.1f} s, '
+    files = f', {len(info["files"])} files' if len(info.get('files', ())) > 1 else ''
+    lines = [f'{info["path"]}: {info["size_bytes"]} B{files}, {info["duration_s"]:.1f} s, '
              f'{len(info["episodes"])} episode(s), {info["total_steps"]} step(s), '
              f'version {info["version"] or "?"}, first seed {info["seed"] or "?"}, '
              f'{info["mode"] or "?"}',

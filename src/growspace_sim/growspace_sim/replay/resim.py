@@ -16,6 +16,7 @@ from growspace_sim.replay.episodes import COMPARED, Episode, StepRecord, read_ep
 from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.ros.interface import digit_fingerprint
+from growspace_sim.node.resume import ResumePoint
 from growspace_sim.simulation import Simulation
 
 
@@ -76,67 +77,115 @@ def resimulate(path: str | os.PathLike, namespace: str | None = None, *,
     """
     report = ResimReport()
     with Bag(path) as bag:
-        topics = bag.chamber_topics(namespace)
-        for full in topics.values():
-            recorded_hash = bag.topics[full].type_hash
-            if recorded_hash and recorded_hash != types.type_hash(bag.topics[full].typename):
-                report.warnings.append(f'{full}: recorded type hash {recorded_hash} differs '
-                                       f"from this version's message definition.")
-        meta = bag.metadata.get(METADATA_NAME, {})
-        source = digit_source or meta.get('digit_source') or 'auto'
-        lockstep = meta.get('mode') != 'realtime'
-        episodes = read_episodes(bag, namespace)
-        report.unreadable = list(bag.damage)
-        if not episodes:
-            raise ReplayError(f'{bag.path} holds no episode start (StepResult with step 0).')
-        sim: Simulation | None = None
-        stream_known = True  # the random stream is where the recording's was
-        for episode in episodes:
-            if episode.damaged or (episode.seed is None and not stream_known):
-                why = '; '.join(episode.damaged) or 'it continues the random stream of an ' \
-                    'episode that could not be checked'
-                report.unverified.append(f'episode {episode.index}: {why}')
-                stream_known = False
-                if progress is not None:
-                    progress(report.episodes + len(report.unverified), len(episodes))
-                continue
-            stream_known = True
-            if episode.config is None:
-                raise ReplayError(f'{bag.path}: episode {episode.index} has no recorded config '
-                                  f'(neither chamber/config nor "growspace" metadata).')
-            if not episode.seed_known or (sim is None and episode.seed is None):
-                raise ReplayError(f'{bag.path}: episode {episode.index} (reset_id '
-                                  f'{episode.reset_id}) has no recorded seed, so it cannot be '
-                                  f're-simulated.')
-            if sim is None or sim.cfg != episode.config:
-                try:
-                    sim = Simulation(episode.config, source) if sim is None \
-                        else sim.with_config(episode.config)
-                except FileNotFoundError as e:
-                    raise ReplayError(f'{bag.path}: episode {episode.index} needs the shape '
-                                      f'digits of source {source!r}: {e}') from e
-                fingerprint = meta.get('digit_fingerprint', '')
-                current = digit_fingerprint(sim)
-                if fingerprint and current and fingerprint != current:
-                    report.warnings.append(f'the shape digits differ from the recorded ones '
-                                           f'(source {source!r}); images will not match.')
-            outcome = sim.reset(seed=episode.seed)
-            mismatch = _compare_step(sim, outcome, episode, episode.steps[0], report) \
-                if episode.reset_recorded else None
-            for record in episode.stepped:
-                if mismatch is not None:
-                    break
-                _apply_command(sim, record, lockstep)
-                outcome = sim.step()
-                mismatch = _compare_step(sim, outcome, episode, record, report)
-                report.steps += 1
-            report.episodes += 1
+        _replay(bag, namespace, digit_source, report, progress)
+    return report
+
+
+def resume_point(path: str | os.PathLike, namespace: str | None = None, *,
+                 digit_source: str | None = None) -> ResumePoint:
+    """Re-simulate a recording to its last step, bit for bit, so the chamber can go on from it.
+
+    Every recorded episode is re-simulated from its seed and commands as ``resimulate`` does
+    (the random stream of an episode reset without a seed depends on the earlier ones) and
+    every step compared with the recording; the simulation is then where the recorded chamber
+    was after its last recorded step.
+
+    Args:
+        path: The recording (a file or a split recording's directory).
+        namespace: The chamber namespace; None = the only one.
+        digit_source: Override the recorded shape-digit source.
+
+    Returns:
+        The resume point.
+
+    Raises:
+        ReplayError: The recording cannot be read, holds no episode, or does not re-simulate
+            exactly (the message names the first mismatch or the unreadable part).
+    """
+    report = ResimReport()
+    with Bag(path) as bag:
+        sim, outcome, last = _replay(bag, namespace, digit_source, report, None)
+    if report.mismatch is not None:
+        raise ReplayError(f'{path} cannot be resumed: re-simulating it differs at '
+                          f'{report.mismatch}.')
+    if report.unverified:
+        raise ReplayError(f'{path} cannot be resumed bit for bit: '
+                          f'{"; ".join(report.unverified)}.')
+    step_ids = [int(s.result.step_id) for s in last.stepped] + \
+        [int(r.step_id) for r in last.rejected]
+    return ResumePoint(sim, outcome, last.seed, last.reset_id, max(step_ids, default=0),
+                       last.steps[-1].log_time, last.done, report)
+
+
+def _replay(bag: Bag, namespace: str | None, digit_source: str | None, report: ResimReport,
+            progress: Callable[[int, int], None] | None) -> tuple[Simulation, Any, Episode]:
+    """Re-simulate and compare every episode of an open recording, filling ``report``.
+
+    Returns:
+        The simulation after the last step re-simulated, that step's outcome and its episode.
+    """
+    topics = bag.chamber_topics(namespace)
+    for full in topics.values():
+        recorded_hash = bag.topics[full].type_hash
+        if recorded_hash and recorded_hash != types.type_hash(bag.topics[full].typename):
+            report.warnings.append(f'{full}: recorded type hash {recorded_hash} differs '
+                                   f"from this version's message definition.")
+    meta = bag.metadata.get(METADATA_NAME, {})
+    source = digit_source or meta.get('digit_source') or 'auto'
+    lockstep = meta.get('mode') != 'realtime'
+    episodes = read_episodes(bag, namespace)
+    report.unreadable = list(bag.damage)
+    if not episodes:
+        raise ReplayError(f'{bag.path} holds no episode start (StepResult with step 0).')
+    sim: Simulation | None = None
+    outcome: Any = None
+    stream_known = True  # the random stream is where the recording's was
+    for episode in episodes:
+        if episode.damaged or (episode.seed is None and not stream_known):
+            why = '; '.join(episode.damaged) or 'it continues the random stream of an ' \
+                'episode that could not be checked'
+            report.unverified.append(f'episode {episode.index}: {why}')
+            stream_known = False
             if progress is not None:
                 progress(report.episodes + len(report.unverified), len(episodes))
+            continue
+        stream_known = True
+        if episode.config is None:
+            raise ReplayError(f'{bag.path}: episode {episode.index} has no recorded config '
+                              f'(neither chamber/config nor "growspace" metadata).')
+        if not episode.seed_known or (sim is None and episode.seed is None):
+            raise ReplayError(f'{bag.path}: episode {episode.index} (reset_id '
+                              f'{episode.reset_id}) has no recorded seed, so it cannot be '
+                              f're-simulated.')
+        if sim is None or sim.cfg != episode.config:
+            try:
+                sim = Simulation(episode.config, source) if sim is None \
+                    else sim.with_config(episode.config)
+            except FileNotFoundError as e:
+                raise ReplayError(f'{bag.path}: episode {episode.index} needs the shape '
+                                  f'digits of source {source!r}: {e}') from e
+            fingerprint = meta.get('digit_fingerprint', '')
+            current = digit_fingerprint(sim)
+            if fingerprint and current and fingerprint != current:
+                report.warnings.append(f'the shape digits differ from the recorded ones '
+                                       f'(source {source!r}); images will not match.')
+        outcome = sim.reset(seed=episode.seed)
+        mismatch = _compare_step(sim, outcome, episode, episode.steps[0], report) \
+            if episode.reset_recorded else None
+        for record in episode.stepped:
             if mismatch is not None:
-                report.mismatch = mismatch
                 break
-    return report
+            _apply_command(sim, record, lockstep)
+            outcome = sim.step()
+            mismatch = _compare_step(sim, outcome, episode, record, report)
+            report.steps += 1
+        report.episodes += 1
+        if progress is not None:
+            progress(report.episodes + len(report.unverified), len(episodes))
+        if mismatch is not None:
+            report.mismatch = mismatch
+            break
+    return sim, outcome, episode
 
 
 def _apply_command(sim: Simulation, record: StepRecord, lockstep: bool) -> None:

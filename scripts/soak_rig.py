@@ -1,0 +1,215 @@
+"""Soak the experiment runner: a long run on sim_node with faults injected at random, each
+followed by ``growspace-rig resume``; at the end, count what was lost, duplicated or unreadable.
+
+    python scripts/soak_rig.py --steps 1000 --faults 20 --seed 1 --out /tmp/soak
+
+Faults (chosen at random after a random number of steps, inside an episode or between two):
+- ``runner_kill``: SIGKILL to the runner (its sim_node stops by itself and finishes its file);
+- ``runner_term``: SIGTERM to the runner (it stops cleanly);
+- ``node_kill``: SIGKILL to the runner's sim_node (the runner sees it die and exits 1);
+- ``power_cut``: SIGKILL to the whole process group (runner and node at once), then what a
+  power cut can do beyond that: the recording's last file cut short where its last pages were
+  not yet on disk, and a journal line half written.
+
+The run's episodes are as many as ``--steps`` needs (50 steps each). Ends with one line:
+``soak: steps=.. faults=.. resumes=.. lost=.. duplicated=.. unreadable_files=.. max_resume_s=..``
+where ``steps`` counts the steps in both the journal and the recording, ``lost`` the steps of
+the run missing from either, ``duplicated`` those in either more than once, ``unreadable_files``
+the recording's files that do not open, and ``max_resume_s`` the longest time from starting
+``resume`` to its first new journaled step. Exit 0 when lost, duplicated and unreadable are 0.
+
+The rig's faults (an unplugged gantry, a camera gone, gantry_node or camera_node killed) and a
+full disk need the GRBL emulator and the photo twin (issue 31 item 6, with gantry_node's growth
+period): not here yet. This soak exercises the runner, the journal, the split recording and
+sim_node's resume.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+import time
+
+FAULTS = ('runner_kill', 'runner_term', 'node_kill', 'power_cut')
+EPISODE_LENGTH = 50
+
+
+def _rig(*args: str) -> list[str]:
+    return [sys.executable, '-m', 'growspace_sim.rig.cli', *args]
+
+
+def _steps(run: Path) -> int:
+    try:
+        return (run / 'journal.jsonl').read_bytes().count(b'"event":"step"')
+    except FileNotFoundError:
+        return 0
+
+
+def _children(pid: int) -> list[int]:
+    """Every descendant of ``pid`` (from /proc), deepest last."""
+    out, todo = [], [pid]
+    while todo:
+        parent = todo.pop()
+        for task in Path(f'/proc/{parent}/task').glob('*'):
+            try:
+                kids = (task / 'children').read_text().split()
+            except OSError:
+                continue
+            for kid in map(int, kids):
+                out.append(kid)
+                todo.append(kid)
+    return out
+
+
+def _node_pid(runner: int) -> int | None:
+    for pid in _children(runner):
+        try:
+            cmdline = Path(f'/proc/{pid}/cmdline').read_bytes()
+        except OSError:
+            continue
+        if b'growspace_sim.node.main' in cmdline or b'sim_node' in cmdline:
+            return pid
+    kids = _children(runner)
+    return kids[-1] if kids else None
+
+
+def _cut_last_file(run: Path, rng: random.Random) -> None:
+    from growspace_sim.recording import split_files, wait_until_free
+
+    wait_until_free(run / 'recording', 60)
+    files = split_files(run / 'recording') if (run / 'recording').is_dir() else []
+    if files:
+        data = files[-1].read_bytes()
+        files[-1].write_bytes(data[:int(len(data) * rng.uniform(0.3, 0.95))])
+
+
+def _tear_journal(run: Path) -> None:
+    with open(run / 'journal.jsonl', 'ab') as stream:
+        stream.write(b'{"event":"step","episode":')
+
+
+def _wait_for_steps(proc: subprocess.Popen, run: Path, target: int, timeout_s: float) -> bool:
+    """Until the journal holds ``target`` steps (True) or the runner ended (False)."""
+    deadline = time.monotonic() + timeout_s
+    while _steps(run) < target:
+        if proc.poll() is not None:
+            return False
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'no progress to {target} steps in {timeout_s:g} s')
+        time.sleep(0.02)  # polling a file another process writes
+    return True
+
+
+def count(run: Path, episodes: int) -> dict[str, int]:
+    """Steps once, lost, duplicated (journal and recording), unreadable recording files."""
+    from growspace_sim.recording import repair, split_files
+    from growspace_sim.replay import Bag, read_episodes, ReplayError
+    from growspace_sim.rig.rundir import read_journal
+    from growspace_sim.rig.runner import reset_id_of
+
+    state = read_journal(run / 'journal.jsonl')
+    journal = {(e.index, s.step) for e in state.episodes for s in e.steps}
+    duplicated = state.duplicated
+    recording = run / 'recording'
+    repair(recording)
+    unreadable = 0
+    for path in split_files(recording):
+        try:
+            Bag(path).close()
+        except ReplayError:
+            unreadable += 1
+    recorded: dict[tuple[int, int], int] = {}
+    with Bag(recording) as bag:
+        for episode in read_episodes(bag):
+            index = episode.reset_id - reset_id_of(0)
+            if not 0 <= index < episodes:
+                continue  # the node's own start-up episodes
+            for record in episode.stepped:
+                key = (index, int(record.result.step))
+                recorded[key] = recorded.get(key, 0) + 1
+    duplicated += sum(n - 1 for n in recorded.values() if n > 1)
+    wanted = {(e, s) for e in range(episodes) for s in range(1, EPISODE_LENGTH + 1)}
+    both = wanted & journal & set(recorded)
+    return {'steps': len(both), 'lost': len(wanted - both), 'duplicated': duplicated,
+            'unreadable_files': unreadable}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--steps', type=int, default=1000, help='steps of the run (>= 50)')
+    parser.add_argument('--faults', type=int, default=20, help='faults to inject (>= 0)')
+    parser.add_argument('--seed', type=int, default=1, help='seed of the faults and the run')
+    parser.add_argument('--out', type=Path, required=True, help='a new directory for the run')
+    parser.add_argument('--step-timeout', type=float, default=600.0, metavar='SECONDS')
+    args = parser.parse_args(argv)
+    if args.steps < EPISODE_LENGTH:
+        parser.error(f'argument --steps: {args.steps} is too few; at least {EPISODE_LENGTH}.')
+    if args.faults < 0:
+        parser.error(f'argument --faults: {args.faults} is not allowed; >= 0.')
+    if args.out.exists():
+        parser.error(f'argument --out: {args.out} exists already; give a new directory.')
+    episodes = -(-args.steps // EPISODE_LENGTH)
+    total = episodes * EPISODE_LENGTH
+    rng = random.Random(args.seed)
+    points = sorted(rng.sample(range(3, total - 2), args.faults)) if args.faults else []
+    run = args.out
+    command = _rig('run', str(run), '--episodes', str(episodes), '--seed', str(args.seed),
+                   '--record-max-bytes', '1000000', '--step-timeout', str(args.step_timeout))
+    faults = resumes = 0
+    resume_times: list[float] = []
+    log = open(os.devnull, 'w')  # noqa: SIM115 - the runner's lines are not the soak's
+    while True:
+        started = time.monotonic()
+        before = _steps(run)
+        proc = subprocess.Popen(command, stdout=log, stderr=subprocess.PIPE,
+                                start_new_session=True)  # its own group: the "power" line
+        if resumes:
+            _wait_for_steps(proc, run, before + 1, args.step_timeout)
+            resume_times.append(time.monotonic() - started)
+        # A point the resume already passed is taken at the next step.
+        point = max(points[0], _steps(run) + 1) if points else None
+        if point is not None and point >= total:
+            point = None  # the run ends first
+        if point is None or not _wait_for_steps(proc, run, point, args.step_timeout):
+            _, err = proc.communicate(timeout=args.step_timeout)
+            if proc.returncode != 0:
+                print(f'soak: the runner failed (exit {proc.returncode}):\n{err.decode()}',
+                      file=sys.stderr)
+                return 1
+            break
+        points.pop(0)
+        fault = rng.choice(FAULTS)
+        if fault == 'runner_kill':
+            proc.send_signal(signal.SIGKILL)
+        elif fault == 'runner_term':
+            proc.send_signal(signal.SIGTERM)
+        elif fault == 'node_kill':
+            node = _node_pid(proc.pid)
+            if node is not None:
+                os.kill(node, signal.SIGKILL)
+        else:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=args.step_timeout)
+        if fault == 'power_cut':
+            _cut_last_file(run, rng)
+            _tear_journal(run)
+        faults += 1
+        resumes += 1
+        print(f'fault {faults}: {fault} at step {_steps(run)}', flush=True)
+        command = _rig('resume', str(run))
+    totals = count(run, episodes)
+    print(f'soak: steps={totals["steps"]} faults={faults} resumes={resumes} '
+          f'lost={totals["lost"]} duplicated={totals["duplicated"]} '
+          f'unreadable_files={totals["unreadable_files"]} '
+          f'max_resume_s={max(resume_times, default=0.0):.1f}')
+    return 0 if not (totals['lost'] or totals['duplicated'] or totals['unreadable_files']) \
+        else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
