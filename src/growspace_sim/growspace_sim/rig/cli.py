@@ -14,6 +14,7 @@ import argparse
 import datetime as dt
 import sys
 
+from growspace_sim import arguments
 from growspace_sim.rig.rundir import (
     CHAMBERS, format_progress, POLICY_KINDS, RunDir, RunDirError, RunSettings)
 
@@ -27,7 +28,7 @@ _OPTIONS = {'policy': '--policy', 'policy_path': '--policy-path', 'challenge': '
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='growspace-rig', description=__doc__.split('\n')[0])
+    parser = arguments.Parser(prog='growspace-rig', description=__doc__.split('\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
     run = sub.add_parser('run', help='create RUN_DIR and run the experiment in it')
     run.add_argument('run_dir', metavar='RUN_DIR', help='a new directory for the run')
@@ -84,8 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 settings = RunSettings(**values)
             except RunDirError as e:
-                name = str(e).split(' = ', 1)[0]
-                return fail(2, f'argument {_OPTIONS.get(name, name)}: {e}')
+                return fail(2, f'argument {_OPTIONS.get(e.field, e.field)}: {e}')
             from growspace_sim.core.config import SimConfig
 
             try:

@@ -41,7 +41,15 @@ POLICY_KINDS = ('oracle', 'random', 'replay', 'model')
 
 
 class RunDirError(Exception):
-    """A run directory that cannot be created, read or continued; the message says why."""
+    """A run directory that cannot be created, read or continued; the message says why.
+
+    Attributes:
+        field: The ``RunSettings`` field a bad setting names ('' for other errors).
+    """
+
+    def __init__(self, message: str, field: str = '') -> None:
+        super().__init__(message)
+        self.field = field
 
 
 def utc_now() -> str:
@@ -92,7 +100,8 @@ class RunSettings:
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> RunDirError:
-            return RunDirError(f'{name} = {getattr(self, name)!r} is not allowed; {allowed}.')
+            return RunDirError(f'{name} = {getattr(self, name)!r} is not allowed; {allowed}.',
+                               field=name)
         if self.policy not in POLICY_KINDS:
             raise bad('policy', f'one of {", ".join(POLICY_KINDS)}')
         if self.policy in ('replay', 'model') and not self.policy_path:
