@@ -183,7 +183,7 @@ def test_cli_info_check_and_errors(tmp_path):
     out = _cli('check', str(path))
     assert out.returncode == 0 and out.stdout.startswith('REPRODUCED: 1 episode(s), 50 step')
     out = _cli('check', str(tmp_path / 'nope.mcap'))
-    assert out.returncode == 2 and 'the file does not exist' in out.stderr
+    assert out.returncode == 2 and "nope.mcap': no such file or folder" in out.stderr
     (tmp_path / 'junk.mcap').write_bytes(b'not a bag at all, definitely not')
     out = _cli('info', str(tmp_path / 'junk.mcap'))
     assert out.returncode == 2 and 'is not an MCAP file' in out.stderr
