@@ -72,7 +72,9 @@ EXPECTED = {
         plant={'leaves': ((0.359, 0.221), (0.369, 0.136), (0.474, 0.116), (0.434, 0.176),
                           (0.446, 0.034)),
                'stem': ((0.411, 0.041), (0.411, 0.104), (0.411, 0.196), (0.409, 0.301),
-                        (0.409, 0.384), (0.404, 0.436))},
+                        (0.409, 0.384), (0.404, 0.436)),
+               # where they cross the pot rim: not to be cut off to make one stem base
+               'leaves drooping over the rim': ((0.299, 0.011), (0.504, 0.002))},
         not_plant={'backdrop': ((0.33, 0.38), (0.47, 0.30), (0.36, 0.175), (0.60, 0.60),
                                 (0.20, 0.10)),
                    'cabinet posts': ((0.01, 0.40), (0.83, 0.40)),
@@ -82,20 +84,21 @@ EXPECTED = {
         foot=(0.41, 0.0)),
     # A seedling: a shoot and four leaves, their ends two source pixels wide and pale.
     'seedling_thin_leaves': Expected(
-        plant={'shoot and leaves': ((0.416, 0.011), (0.419, 0.141), (0.434, 0.094)),
-               'thin leaves': ((0.379, 0.104), (0.354, 0.111), (0.374, 0.041))},
-        not_plant={'backdrop': ((0.37, 0.15), (0.47, 0.06), (0.40, 0.18), (0.60, 0.40)),
-                   'cabinet posts and glass': ((0.71, 0.52), (0.003, 0.377)),
-                   'pot and soil': ((0.46, 0.002),)},
-        tips=((0.432, 0.205), (0.332, 0.11), (0.455, 0.122), (0.348, 0.038)),
-        foot=(0.418, 0.0)),
+        plant={'shoot and leaves': ((0.414, 0.006), (0.416, 0.179), (0.434, 0.114)),
+               'thin leaves': ((0.361, 0.139), (0.341, 0.144), (0.361, 0.054))},
+        not_plant={'backdrop': ((0.355, 0.195), (0.485, 0.078), (0.394, 0.234), (0.654, 0.52)),
+                   'cabinet post edge': ((0.800, 0.643), (0.799, 0.309)),
+                   'pot and soil': ((0.472, 0.003),)},
+        tips=((0.436, 0.267), (0.306, 0.143), (0.466, 0.159), (0.326, 0.049)),
+        foot=(0.417, 0.0)),
     # Thin grass leaves arching out and down past the pot on both sides: one plant.
     'grass_drooping_leaves': Expected(
-        plant={'shoot and leaves': ((0.404, 0.161), (0.409, 0.081), (0.334, 0.119),
-                                    (0.351, 0.074), (0.499, 0.031))},
-        not_plant={'backdrop': ((0.36, 0.16), (0.50, 0.12), (0.50, 0.08), (0.60, 0.40)),
-                   'cabinet posts and glass': ((0.721, 0.70), (0.686, 0.75), (0.832, 0.078))},
-        tips=((0.41, 0.195),),
+        plant={'shoot and leaves': ((0.396, 0.209), (0.404, 0.106), (0.301, 0.146),
+                                    (0.331, 0.096), (0.526, 0.044)),
+               'leaves drooping over the rim': ((0.301, 0.026), (0.566, 0.026))},
+        not_plant={'backdrop': ((0.342, 0.208), (0.524, 0.156), (0.524, 0.104), (0.654, 0.52)),
+                   'cabinet post edge': ((0.815, 0.304), (0.813, 0.21))},
+        tips=((0.407, 0.254),),
         foot=(0.42, 0.0)),
     # A small tree: a brown, woody, leaning trunk (tissue excess green does not see), green
     # leaves above; a blue mesh on the soil.
@@ -116,22 +119,22 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
         f'{ITEM2}: thin, pale leaf blades and their ends fall below the threshold',
     ('woody_tree', 'plant', 'brown trunk'):
         f'{ITEM2}: excess green does not see a brown woody trunk',
-    ('seedling_thin_leaves', 'not_plant', 'cabinet posts and glass'):
-        f'{ITEM2}: colour fringes along the cabinet glass and posts pass for green',
-    ('grass_drooping_leaves', 'not_plant', 'cabinet posts and glass'):
-        f'{ITEM2}: colour fringes along the cabinet glass and posts pass for green',
+    ('seedling_thin_leaves', 'not_plant', 'cabinet post edge'):
+        f'{ITEM2}: the colour fringe along a black cabinet post passes for green',
+    ('grass_drooping_leaves', 'not_plant', 'cabinet post edge'):
+        f'{ITEM2}: the colour fringe along a black cabinet post passes for green',
     ('leafy_side_view', 'outcome', ''):
         f"{ITEM3}: refused 'plants: 3 stem base(s)', two drooping leaves cross the soil line",
     ('grass_drooping_leaves', 'outcome', ''):
-        f"{ITEM3}: refused 'plants: 4 stem base(s)', drooping leaves cross the soil line",
+        f"{ITEM3}: refused 'plants: 3 stem base(s)', drooping leaves cross the soil line",
     ('woody_tree', 'outcome', ''):
         f"{ITEM2}: refused 'no_plant: no stem reaches the floor', the brown trunk is not in "
         'the mask',
     ('leafy_side_view', 'tips', ''): f'{ITEM3}: refused (3 stem bases), no tips to check',
     ('seedling_thin_leaves', 'tips', ''):
-        f'{ITEM2} and {ITEM3}: the thin leaf ends are lost (no tip there) and two tips sit '
-        'at the cut base',
-    ('grass_drooping_leaves', 'tips', ''): f'{ITEM3}: refused (4 stem bases), no tips to check',
+        f'{ITEM2} and {ITEM3}: accepted (reward 0.073) with the two thin '
+        'lower-left leaf ends lost (no tip there) and a tip at the cut base',
+    ('grass_drooping_leaves', 'tips', ''): f'{ITEM3}: refused (3 stem bases), no tips to check',
     ('woody_tree', 'tips', ''): f'{ITEM2}: refused (the trunk is not masked), no tips to check',
 }
 
