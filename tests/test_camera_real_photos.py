@@ -132,8 +132,8 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
         'the mask',
     ('leafy_side_view', 'tips', ''): f'{ITEM3}: refused (3 stem bases), no tips to check',
     ('seedling_thin_leaves', 'tips', ''):
-        f'{ITEM2} and {ITEM3}: accepted (reward 0.073) with the two thin '
-        'lower-left leaf ends lost (no tip there) and a tip at the cut base',
+        f'{ITEM2} and {ITEM3}: accepted (reward 0.073; {ITEM4}) with the ends of both '
+        'thin left leaves lost (no tip there) and a tip at the cut base',
     ('grass_drooping_leaves', 'tips', ''): f'{ITEM3}: refused (3 stem bases), no tips to check',
     ('woody_tree', 'tips', ''): f'{ITEM2}: refused (the trunk is not masked), no tips to check',
 }
