@@ -22,6 +22,8 @@ SATURATED = 250  # grey level from which a pixel counts as clipped
 EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
+WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
+FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
 WARM = 0.08  # r - b on chromatic coordinates from which a dark pixel counts fully as bark
 BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
@@ -194,7 +196,9 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
     backdrop = (~exclude).astype(np.float32)
     if not backdrop.any():
         return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
-    if fill is None:
+    if not exclude.any():
+        fill = bgr
+    elif fill is None:
         size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
         weight = cv2.blur(backdrop, size)
         fill = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
@@ -203,8 +207,13 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
         fill = cv2.divide(fill, cv2.merge((np.maximum(weight, 1e-6),) * 3))
         fill[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
     filled = np.where(exclude[..., None], fill, bgr)
-    light = cv2.medianBlur(np.clip(filled, 1.0, 255.0).astype(np.uint8),
-                           max(3, int(round(edge_m / pixel_m)) | 1)).astype(np.float32)
+    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
+    # may hold a little soil.
+    k = max(3, int(round(edge_m / pixel_m)) | 1)
+    h = k // 2
+    padded = cv2.copyMakeBorder(np.clip(filled, 1.0, 255.0).astype(np.uint8), h, h, h, h,
+                                cv2.BORDER_REFLECT_101)
+    light = cv2.medianBlur(padded, k)[h:-h, h:-h].astype(np.float32)
     # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
     level = float(np.mean(cv2.mean(light)[:3]))
     return cv2.divide(bgr, light, scale=level), level, light
@@ -251,12 +260,12 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     gain = float(balance.mean()) / np.maximum(balance, 1.0)
     bgr = cv2.multiply(bgr, (*gain.tolist(), 0.0))
     first = greenness(bgr)
-    rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
-    rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
+    rough = (first > max(_otsu(first), params.min_greenness)).view(np.uint8)
+    rough = _without_floods(cv2.dilate(rough, np.ones((5, 5), np.uint8)).view(bool))
     # Two passes: a wide median first (a thick brown trunk, which greenness missed, is less
     # than half of its window), then a narrower one, which follows closer lamp bands, with
     # what the first found left out.
-    flat, level, light = flat_field(bgr, rough, params.pixel_m, 3.0 * EDGE_KERNEL_M)
+    flat, level, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
     found = tissue(flat, level)
     found = found > max(_otsu(found), params.min_greenness)
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
@@ -287,6 +296,17 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
         plant[:] = False
     return Segmentation(plant, float(threshold), contrast, specks,
                         _coverage(exg, plant, centre))
+
+
+def _without_floods(rough: np.ndarray) -> np.ndarray:
+    """A rough mask less its regions wider than ``FLOOD_FRACTION`` of the chamber: before the
+    flat field, the part of the backdrop that the grow lamp does not reach looks green
+    beside the part it does (the photo is balanced on their mix); that is light, not plant."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(rough.view(np.uint8),
+                                                               connectivity=8)
+    flood = stats[:, cv2.CC_STAT_AREA] > FLOOD_FRACTION * rough.size
+    flood[0] = False
+    return rough & ~flood[labels] if flood.any() else rough
 
 
 def _floor_rows(index: np.ndarray, pixel_m: float) -> None:
