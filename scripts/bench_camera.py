@@ -27,15 +27,32 @@ Fixed method (every draw seeded, so a run is repeatable):
    after every step (a refused photo: the last measured view is kept). Returns are the
    simulator's rewards (the real plant's). closed_loop = (b) / (a), per challenge; the line
    reports the lowest. The privileged oracle (real photons) is run for reference.
-3. Speed. ``--speed-photos`` twin photos (1920 x 1080, control hard after steps 30-50)
+3. The varied twin (``twin.Variation``: how rigs differ, docs/hardware.md). Every fidelity
+   photo is also drawn (same photo seed) with a factor combination of its own: ids from
+   ``HELD_OUT_FIRST`` (1,000,000) by default, the held-out set never looked at while tuning;
+   ``--combinations tuning`` uses ids from 0 for development. In the first
+   ``--factor-episodes`` episodes of each cell, each photo is also drawn with each factor on
+   alone, compared with the old twin on the same photos. Closed loop on the varied twin:
+   ``--loop-episodes-varied`` episodes per challenge, each photo its own combination (ids
+   from 500,000 within the range). Each condition has its own ``Pipeline`` per episode.
+   Figures of a set of photos (``headline``): IoU and tips as above, tips_precision (measured
+   tips within 1 cm of a simulator tip, accepted photos), reward_mae, accept_precision (of
+   accepted photos, those whose reward is within 0.05 of the simulator's) and refused (of
+   photos at step >= 12).
+4. Speed. ``--speed-photos`` twin photos (1920 x 1080, control hard after steps 30-50)
    measured on one pinned core with OpenCV on one thread, in 3 rounds; the fastest round's
    median time per step and in total (photo decoded, as a capture delivers it; decoding the
    JPEG is listed apart).
 
 Usage (workspace sourced): python scripts/bench_camera.py [--episodes 4] [--loop-episodes 20]
-       [--speed-photos 60] [--json out.json]
-Ends with one line: camera: iou_mean=.. iou_p5=.. tips_1cm=.. reward_mae=.. closed_loop=..
-ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
+       [--factor-episodes 1] [--loop-episodes-varied 4] [--combinations held_out|tuning]
+       [--speed-photos 60] [--json out.json] [--quick]
+--quick (development: 1 episode per cell, steps 12, 30 and 50, 2 + 2 loop episodes, 10 speed
+photos) takes about 5 minutes on 2 free cores; the defaults about an hour.
+Ends with two lines: camera held_out: <the headline figures> closed_loop=.. ms_per_photo=..
+(the varied twin), then, the old twin's: camera: iou_mean=.. iou_p5=.. tips_1cm=..
+reward_mae=.. closed_loop=.. ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
+tips_precision=.. accept_precision=.. refused=..
 """
 
 from __future__ import annotations
