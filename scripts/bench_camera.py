@@ -48,7 +48,8 @@ Usage (workspace sourced): python scripts/bench_camera.py [--episodes 4] [--loop
        [--factor-episodes 1] [--loop-episodes-varied 4] [--combinations held_out|tuning]
        [--speed-photos 60] [--json out.json] [--quick]
 --quick (development: 1 episode per cell, steps 12, 30 and 50, 2 + 2 loop episodes, 10 speed
-photos) takes about 5 minutes on 2 free cores; the defaults about an hour.
+photos) takes about 3 minutes of one core; the defaults about half an hour (a loaded machine
+slows both several times).
 Ends with two lines: camera held_out: <the headline figures> closed_loop=.. ms_per_photo=..
 (the varied twin), then, the old twin's: camera: iou_mean=.. iou_p5=.. tips_1cm=..
 reward_mae=.. closed_loop=.. ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
