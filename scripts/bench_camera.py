@@ -28,12 +28,14 @@ Fixed method (every draw seeded, so a run is repeatable):
    simulator's rewards (the real plant's). closed_loop = (b) / (a), per challenge; the line
    reports the lowest. The privileged oracle (real photons) is run for reference.
 3. The varied twin (``twin.Variation``: how rigs differ, docs/hardware.md). Every fidelity
-   photo is also drawn (same photo seed) with a factor combination of its own: ids from
+   photo is also drawn (same photo seed) on a rig of its episode: a factor combination per
+   episode, its camera pose and factor values drawn from the episode's seed (a rig's camera
+   stays put, so the held plane fit meets what it is made for); combination ids from
    ``HELD_OUT_FIRST`` (1,000,000) by default, the held-out set never looked at while tuning;
    ``--combinations tuning`` uses ids from 0 for development. In the first
-   ``--factor-episodes`` episodes of each cell, each photo is also drawn with each factor on
-   alone, compared with the old twin on the same photos. Closed loop on the varied twin:
-   ``--loop-episodes-varied`` episodes per challenge, each photo its own combination (ids
+   ``--factor-episodes`` episodes of each cell, each photo is also drawn with each factor of
+   ``--factors`` on alone, compared with the old twin on the same photos. Closed loop on the
+   varied twin: ``--loop-episodes-varied`` episodes per challenge, a combination each (ids
    from 500,000 within the range). Each condition has its own ``Pipeline`` per episode.
    Figures of a set of photos (``headline``): IoU and tips as above, tips_precision (measured
    tips within 1 cm of a simulator tip, accepted photos), reward_mae, accept_precision (of
@@ -95,35 +97,38 @@ def target_of(sim: Simulation) -> Target:
     return Target(c.target, c.target_mask)
 
 
-def combination_id(combinations: str, challenge: str, setting: str, seed: int,
-                   step: int) -> int:
-    """The factor combination of one photo: its own id per challenge, setting, episode and
-    step, in the tuning range (0..) or the held-out range (``HELD_OUT_FIRST``..)."""
+def combination_id(combinations: str, challenge: str, setting: str, seed: int) -> int:
+    """The factor combination of one episode (a rig does not change between photos): its own
+    id per challenge, setting and episode, in the tuning range (0..) or the held-out range
+    (``HELD_OUT_FIRST``..)."""
     cell = CHALLENGES.index(challenge) * 2 + ('easy', 'hard').index(setting)
-    local = (cell * 100 + seed % 100) * 100 + step
+    local = cell * 1000 + seed % 1000
     return local + (HELD_OUT_FIRST if combinations == 'held_out' else 0)
 
 
-def conditions(factor_episodes: int, combinations: str) -> dict[str, Callable]:
+def conditions(factor_episodes: int, combinations: str,
+               factors: tuple[str, ...] = tuple(FACTORS)) -> dict[str, Callable]:
     """Condition name -> (challenge, setting, episode, seed, step) -> the photo's Variation,
     or None where that condition skips the photo (one-factor conditions photograph only the
     first ``factor_episodes`` episodes of each cell)."""
     out: dict[str, Callable] = {'old_twin': lambda *_: Variation()}
     out[combinations] = lambda c, s, e, seed, step: Variation.combination(
-        combination_id(combinations, c, s, seed, step))
-    for name in FACTORS:
+        combination_id(combinations, c, s, seed))
+    for name in factors:
         out[name] = (lambda n: lambda c, s, e, seed, step:
                      Variation.only(n) if e < factor_episodes else None)(name)
     return out
 
 
 def fidelity(episodes: int, twin: PhotoTwin, steps: tuple[int, ...] = PHOTO_STEPS,
-             factor_episodes: int = 1, combinations: str = 'held_out') -> list[dict]:
+             factor_episodes: int = 1, combinations: str = 'held_out',
+             factors: tuple[str, ...] = tuple(FACTORS)) -> list[dict]:
     """Rows per photo and condition (``conditions``): each simulated photo step is
     photographed once per condition with the same photo seed, each condition measured by its
-    own ``Pipeline`` per episode."""
+    own ``Pipeline`` per episode; a varied photo's rig (camera pose, the factors' values) is
+    the episode's (``rig_seed``), as a rig's is."""
     rows = []
-    variations = conditions(factor_episodes, combinations)
+    variations = conditions(factor_episodes, combinations, factors)
     for challenge in CHALLENGES:
         for setting in ('easy', 'hard'):
             cfg = SimConfig(challenge=challenge, setting=setting)
@@ -150,7 +155,7 @@ def fidelity(episodes: int, twin: PhotoTwin, steps: tuple[int, ...] = PHOTO_STEP
                         if variation is None:
                             continue
                         photo = twin.photo(sim.chamber, seed=seed * 100 + step,
-                                           variation=variation)
+                                           variation=variation, rig_seed=seed)
                         m = pipes[name].measure(photo.bgr, cfg, sim.chamber.light.copy(),
                                                 target_of(sim), sim.chamber.steps)
                         row = _compare(challenge, setting, seed, step, sim, outcome, m)
@@ -248,7 +253,8 @@ def closed_loop(episodes: int, twin: PhotoTwin,
     """Per challenge: mean return of the privileged oracle, of the same oracle on the
     simulator's plants (``sim_view``) and on the camera's measurement (``camera``): of the
     old twin's photos, or with ``combinations`` (tuning or held_out) each photo with its own
-    factor combination (ids from 500,000 up within the range, apart from fidelity's)."""
+    factor combination per episode (ids from 500,000 up within the range, apart from
+    fidelity's) and its rig drawn from the episode's seed."""
     out = {}
     for ci, challenge in enumerate(CHALLENGES):
         returns = {'privileged': [], 'sim_view': [], 'camera': [], 'camera_estimate': []}
@@ -257,13 +263,12 @@ def closed_loop(episodes: int, twin: PhotoTwin,
             setting = ('easy', 'hard')[e % 2]
             cfg = SimConfig(challenge=challenge, setting=setting)
             seed = 2000 + e
-            variation_of = None
+            variation = None
             if combinations is not None:
                 first = 500_000 + (HELD_OUT_FIRST if combinations == 'held_out' else 0)
-                variation_of = (lambda base: lambda step: Variation.combination(base + step))(
-                    first + (ci * 1000 + e) * 100)
+                variation = Variation.combination(first + ci * 1000 + e)
             for mode in ('privileged', 'sim_view', 'camera'):
-                total, estimate, misses = _loop_episode(cfg, seed, mode, twin, variation_of)
+                total, estimate, misses = _loop_episode(cfg, seed, mode, twin, variation)
                 returns[mode].append(total)
                 refused += misses
                 if mode == 'camera':
@@ -276,7 +281,7 @@ def closed_loop(episodes: int, twin: PhotoTwin,
 
 
 def _loop_episode(cfg: SimConfig, seed: int, mode: str, twin: PhotoTwin,
-                  variation_of: Callable | None = None) -> tuple[float, float, int]:
+                  variation: Variation | None = None) -> tuple[float, float, int]:
     """One episode; returns (the simulator's return, the camera's estimate of it, refused
     photos). A refused photo leaves the oracle with the last view it had (none: stay)."""
     sim = Simulation(cfg)
@@ -296,7 +301,7 @@ def _loop_episode(cfg: SimConfig, seed: int, mode: str, twin: PhotoTwin,
             view = oracle_chamber(plant_view(sim.chamber.state), cfg)
         elif mode == 'camera':
             photo = twin.photo(sim.chamber, seed=seed * 100 + step,
-                               variation=variation_of(step) if variation_of else None)
+                               variation=variation, rig_seed=seed)
             m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
                              sim.chamber.steps)
             if m.ok:
@@ -428,6 +433,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--combinations', choices=('held_out', 'tuning'), default='held_out',
                         help="the varied twin's factor combinations: held_out (the reported "
                         'figures; never used while tuning) or tuning (for development)')
+    parser.add_argument('--factors', default=','.join(FACTORS),
+                        help='the factors measured one at a time (comma-separated)')
     parser.add_argument('--quick', action='store_true',
                         help='for development: 1 episode per cell, steps 12, 30, 50, 2 loop '
                         'episodes, 10 speed photos')
@@ -444,7 +451,12 @@ def main(argv: list[str] | None = None) -> int:
         print(_speed_line(speed(args.speed_photos, twin)))
         return 0
     started = time.time()
-    all_rows = fidelity(args.episodes, twin, steps, args.factor_episodes, args.combinations)
+    factors = tuple(f for f in args.factors.split(',') if f)
+    unknown = sorted(set(factors) - set(FACTORS))
+    if unknown:
+        parser.error(f'--factors: unknown {unknown}; known: {",".join(FACTORS)}')
+    all_rows = fidelity(args.episodes, twin, steps, args.factor_episodes, args.combinations,
+                        factors)
     rows = [r for r in all_rows if r['condition'] == 'old_twin']
     varied = [r for r in all_rows if r['condition'] == args.combinations]
     refused = [r for r in rows if not r['ok']]
@@ -462,7 +474,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'  refused: {r["challenge"]} {r["setting"]} seed {r["seed"]} step {r["step"]}: '
               f'{r["error"]}')
     print(f'{args.combinations} factor combinations (ids from '
-          f'{HELD_OUT_FIRST if args.combinations == "held_out" else 0}, one per photo):')
+          f'{HELD_OUT_FIRST if args.combinations == "held_out" else 0}, one per episode):')
     _print_cells(varied)
     reasons: dict[str, int] = {}
     for r in varied:

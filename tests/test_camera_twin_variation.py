@@ -115,3 +115,15 @@ def test_a_woody_plant_under_a_hard_edged_lamp_is_measured(chamber):
     m = Pipeline().measure(shot.bgr, chamber.cfg, c.light.copy(), Target(c.target), c.steps)
     assert m.ok, m.error
     assert abs(m.reward - chamber.reward) < 0.05
+
+
+def test_a_rigs_camera_stays_put_through_an_episode(chamber):
+    twin, c = PhotoTwin(LAYOUT, size=(320, 180)), chamber.sim.chamber
+    camera = Variation.only('camera')
+    a = twin.photo(c, seed=101, variation=camera, rig_seed=7)
+    b = twin.photo(c, seed=102, variation=camera, rig_seed=7)
+    assert np.array_equal(a.pose.centre, b.pose.centre) and a.jpeg != b.jpeg
+    apart = twin.photo(c, seed=102, variation=camera)
+    assert not np.array_equal(apart.pose.centre, a.pose.centre)
+    # The default twin keeps its photo-by-photo pose (its figures do not move).
+    assert twin.photo(c, seed=102, rig_seed=7).jpeg == twin.photo(c, seed=102).jpeg

@@ -98,7 +98,8 @@ class PhotoTwin:
         self.variation = variation or Variation()
 
     def photo(self, chamber: Chamber, seed: int, hidden: tuple[int, ...] = (),
-              plant: bool = True, variation: Variation | None = None) -> TwinPhoto:
+              plant: bool = True, variation: Variation | None = None,
+              rig_seed: int | None = None) -> TwinPhoto:
         """Photograph the chamber as it is now.
 
         Args:
@@ -107,14 +108,23 @@ class PhotoTwin:
             hidden: Marker ids covered by something (a dark card).
             plant: False draws the empty pots (the plant is not drawn).
             variation: This photo's factors (default: the twin's own).
+            rig_seed: With a variation, draws what belongs to the rig rather than to the
+                photo (the camera's pose, the factors' values: backdrop, lamp, lens, tape
+                on a marker) from this seed: a rig's camera stays put for an episode, so
+                the pipeline's held plane fit meets the photos it is made for. None: all
+                from ``seed`` (the default twin always: each photo its own pose).
         """
         rng = np.random.default_rng(seed)
         variation = self.variation if variation is None else variation
         j = jitter_for(self.jitter, variation)
         cfg = chamber.cfg
-        rig = draw_rig(seed, variation, cfg.plant_count)
+        fixed = rig_seed is not None and bool(variation.factors)
+        rig = draw_rig(rig_seed if fixed else seed, variation, cfg.plant_count)
         x0, z0, x1, z1 = self._board(cfg.chamber_width, cfg.chamber_height)
         pose = self._pose(rng, (x0, z0, x1, z1), j)
+        if fixed:  # the photo's own draw is made all the same, so the rest stay aligned
+            pose = self._pose(np.random.default_rng([rig_seed, VARY_SALT, 3]),
+                              (x0, z0, x1, z1), j)
         canvas = _backdrop(rng, x0, z0, x1, z1)
         level = BACKDROP_LEVEL[1]
         if rig.backdrop != 'grey':
