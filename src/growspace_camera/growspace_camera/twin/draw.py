@@ -109,8 +109,8 @@ class PhotoTwin:
             plant: False draws the empty pots (the plant is not drawn).
             variation: This photo's factors (default: the twin's own).
             rig_seed: With a variation, draws what belongs to the rig rather than to the
-                photo (the camera's pose, the factors' values: backdrop, lamp, lens, tape
-                on a marker) from this seed: a rig's camera stays put for an episode, so
+                photo (the camera's pose, the factors' values: backdrop, lamp, lens, the
+                markers' wear) from this seed: a rig's camera stays put for an episode, so
                 the pipeline's held plane fit meets the photos it is made for. None: all
                 from ``seed`` (the default twin always: each photo its own pose).
         """
@@ -119,7 +119,7 @@ class PhotoTwin:
         j = jitter_for(self.jitter, variation)
         cfg = chamber.cfg
         fixed = rig_seed is not None and bool(variation.factors)
-        rig = draw_rig(rig_seed if fixed else seed, variation, cfg.plant_count)
+        rig = draw_rig(rig_seed if fixed else seed, variation, cfg.plant_count, seed)
         x0, z0, x1, z1 = self._board(cfg.chamber_width, cfg.chamber_height)
         pose = self._pose(rng, (x0, z0, x1, z1), j)
         if fixed:  # the photo's own draw is made all the same, so the rest stay aligned

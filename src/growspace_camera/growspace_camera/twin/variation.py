@@ -19,6 +19,7 @@ import numpy as np
 VARY_SALT = 0x5A17  # mixed with a photo's seed for the factors' own generator
 HELD_OUT_FIRST = 1_000_000  # combination ids from here on are held out: never used in tuning
 COMBINATION_P = 0.5  # each factor is on in a combination with this probability
+MARKER_COVERED_P = 0.3  # with 'markers', the share of photos with one marker partly covered
 
 # The factors, in drawing order, and what each varies (docs/hardware.md has the ranges).
 FACTORS = {
@@ -35,7 +36,7 @@ FACTORS = {
     'lens': 'barrel or pincushion distortion (k1 -0.06 to 0.03), not corrected by the pipeline',
     'optics': 'blur to 2.5 px, read noise to 8 DN, shot noise to 0.4, JPEG quality 40-95',
     'camera': 'camera distance (fill 1.08-1.5), tilt to 8 degrees, roll to 6 degrees',
-    'markers': 'worn markers (grey black, dull paper) and partly covered ones',
+    'markers': 'worn markers (grey black, dull paper); in 3 photos of 10 one partly covered',
 }
 
 LAMP_CASTS = {  # BGR per unit of lamp strength
@@ -128,8 +129,11 @@ def jitter_for(jitter, variation: Variation):  # noqa: ANN001, ANN201
     return jitter
 
 
-def draw_rig(seed: int, variation: Variation, plants: int) -> RigDraw:
-    """The factors' values for one photo (their own generator: see the module docstring)."""
+def draw_rig(seed: int, variation: Variation, plants: int,
+             photo_seed: int | None = None) -> RigDraw:
+    """The factors' values for one photo (their own generator: see the module docstring):
+    the rig's from ``seed``; what changes from photo to photo on a rig (tape or a leaf over
+    a marker) from ``photo_seed`` (default: ``seed``)."""
     rig = RigDraw()
     if not variation.factors:
         return rig
@@ -151,7 +155,9 @@ def draw_rig(seed: int, variation: Variation, plants: int) -> RigDraw:
     gradient = float(rng.uniform(0.2, 0.5))
     k1 = float(rng.uniform(-0.06, 0.03))
     black, paper = float(rng.uniform(40.0, 95.0)), float(rng.uniform(185.0, 235.0))
-    cover, covered = float(rng.uniform(0.1, 0.35)), int(rng.integers(-1, 4))
+    shot = np.random.default_rng([seed if photo_seed is None else photo_seed, VARY_SALT, 4])
+    cover, covered = float(shot.uniform(0.1, 0.35)), int(shot.integers(4))
+    covered = covered if shot.random() < MARKER_COVERED_P else -1
     v = variation
     if 'lamp_edge' in v:
         rig.lamp_edge_m = edge
