@@ -27,15 +27,35 @@ Fixed method (every draw seeded, so a run is repeatable):
    after every step (a refused photo: the last measured view is kept). Returns are the
    simulator's rewards (the real plant's). closed_loop = (b) / (a), per challenge; the line
    reports the lowest. The privileged oracle (real photons) is run for reference.
-3. Speed. ``--speed-photos`` twin photos (1920 x 1080, control hard after steps 30-50)
+3. The varied twin (``twin.Variation``: how rigs differ, docs/hardware.md). Every fidelity
+   photo is also drawn (same photo seed) on a rig of its episode: a factor combination per
+   episode, its camera pose and factor values drawn from the episode's seed (a rig's camera
+   stays put, so the held plane fit meets what it is made for); combination ids from
+   ``HELD_OUT_FIRST`` (1,000,000) by default, the held-out set never looked at while tuning;
+   ``--combinations tuning`` uses ids from 0 for development. In the first
+   ``--factor-episodes`` episodes of each cell, each photo is also drawn with each factor of
+   ``--factors`` on alone, compared with the old twin on the same photos. Closed loop on the
+   varied twin: ``--loop-episodes-varied`` episodes per challenge, a combination each (ids
+   from 500,000 within the range). Each condition has its own ``Pipeline`` per episode.
+   Figures of a set of photos (``headline``): IoU and tips as above, tips_precision (measured
+   tips within 1 cm of a simulator tip, accepted photos), reward_mae, accept_precision (of
+   accepted photos, those whose reward is within 0.05 of the simulator's) and refused (of
+   photos at step >= 12).
+4. Speed. ``--speed-photos`` twin photos (1920 x 1080, control hard after steps 30-50)
    measured on one pinned core with OpenCV on one thread, in 3 rounds; the fastest round's
    median time per step and in total (photo decoded, as a capture delivers it; decoding the
    JPEG is listed apart).
 
 Usage (workspace sourced): python scripts/bench_camera.py [--episodes 4] [--loop-episodes 20]
-       [--speed-photos 60] [--json out.json]
-Ends with one line: camera: iou_mean=.. iou_p5=.. tips_1cm=.. reward_mae=.. closed_loop=..
-ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
+       [--factor-episodes 1] [--loop-episodes-varied 4] [--combinations held_out|tuning]
+       [--speed-photos 60] [--json out.json] [--quick]
+--quick (development: 1 episode per cell, steps 12, 30 and 50, 2 + 2 loop episodes, 10 speed
+photos) takes about 3 minutes of one core; the defaults about half an hour (a loaded machine
+slows both several times).
+Ends with two lines: camera held_out: <the headline figures> closed_loop=.. ms_per_photo=..
+(the varied twin), then, the old twin's: camera: iou_mean=.. iou_p5=.. tips_1cm=..
+reward_mae=.. closed_loop=.. ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
+tips_precision=.. accept_precision=.. refused=..
 """
 
 from __future__ import annotations
@@ -45,6 +65,7 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -54,7 +75,7 @@ from growspace_camera.markers import MarkerLayout
 from growspace_camera.nodes import PlantTree
 from growspace_camera.oracle_view import oracle_chamber, plant_view
 from growspace_camera.pipeline import Pipeline
-from growspace_camera.twin import PhotoTwin
+from growspace_camera.twin import FACTORS, HELD_OUT_FIRST, PhotoTwin, Variation
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
@@ -63,6 +84,8 @@ from growspace_sim.simulation import Simulation
 PHOTO_STEPS = (6, 12, 18, 24, 30, 36, 42, 48, 50)
 ROUNDS = 3  # speed rounds; the fastest round's medians are reported
 CHALLENGES = ('control', 'find_plant', 'fairness', 'shape')
+GROWN_STEP = 12  # photos from this step on are of grown plants (the refused fraction)
+ACCEPT_WITHIN = 0.05  # an accepted photo's reward this close to the simulator's is right
 FLOOR_MM = (0.25, 1.0)  # node errors for the metric's floor (see _moved_iou) [mm]
 CENTRE_LINE_PX = 84  # shape's centre lines are compared at 1 cm pixels (see the docstring)
 _TOLERANCE = np.ones((3, 3), np.uint8)  # ... matched within one pixel
@@ -74,8 +97,38 @@ def target_of(sim: Simulation) -> Target:
     return Target(c.target, c.target_mask)
 
 
-def fidelity(episodes: int, twin: PhotoTwin) -> list[dict]:
+def combination_id(combinations: str, challenge: str, setting: str, seed: int) -> int:
+    """The factor combination of one episode (a rig does not change between photos): its own
+    id per challenge, setting and episode, in the tuning range (0..) or the held-out range
+    (``HELD_OUT_FIRST``..)."""
+    cell = CHALLENGES.index(challenge) * 2 + ('easy', 'hard').index(setting)
+    local = cell * 1000 + seed % 1000
+    return local + (HELD_OUT_FIRST if combinations == 'held_out' else 0)
+
+
+def conditions(factor_episodes: int, combinations: str,
+               factors: tuple[str, ...] = tuple(FACTORS)) -> dict[str, Callable]:
+    """Condition name -> (challenge, setting, episode, seed, step) -> the photo's Variation,
+    or None where that condition skips the photo (one-factor conditions photograph only the
+    first ``factor_episodes`` episodes of each cell)."""
+    out: dict[str, Callable] = {'old_twin': lambda *_: Variation()}
+    out[combinations] = lambda c, s, e, seed, step: Variation.combination(
+        combination_id(combinations, c, s, seed))
+    for name in factors:
+        out[name] = (lambda n: lambda c, s, e, seed, step:
+                     Variation.only(n) if e < factor_episodes else None)(name)
+    return out
+
+
+def fidelity(episodes: int, twin: PhotoTwin, steps: tuple[int, ...] = PHOTO_STEPS,
+             factor_episodes: int = 1, combinations: str = 'held_out',
+             factors: tuple[str, ...] = tuple(FACTORS)) -> list[dict]:
+    """Rows per photo and condition (``conditions``): each simulated photo step is
+    photographed once per condition with the same photo seed, each condition measured by its
+    own ``Pipeline`` per episode; a varied photo's rig (camera pose, the factors' values) is
+    the episode's (``rig_seed``), as a rig's is."""
     rows = []
+    variations = conditions(factor_episodes, combinations, factors)
     for challenge in CHALLENGES:
         for setting in ('easy', 'hard'):
             cfg = SimConfig(challenge=challenge, setting=setting)
@@ -85,22 +138,30 @@ def fidelity(episodes: int, twin: PhotoTwin) -> list[dict]:
                 sim.reset(seed=seed)
                 rng = np.random.default_rng(seed)
                 oracle = cfg.task.oracle() if e % 2 == 0 else None
-                pipe = Pipeline(PipelineParamsDefault)
+                pipes = {name: Pipeline(PipelineParamsDefault) for name in variations}
                 actions = 7 if cfg.uses_spotlight else 5
                 for step in range(1, cfg.episode_length + 1):
                     action = oracle.act(sim.chamber) if oracle else int(rng.integers(actions))
                     sim.apply_discrete(action)
                     outcome = sim.step()
-                    if step not in PHOTO_STEPS:
+                    if step not in steps:
                         continue
-                    photo = twin.photo(sim.chamber, seed=seed * 100 + step)
-                    m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
-                                     sim.chamber.steps)
-                    row = _compare(challenge, setting, seed, step, sim, outcome, m)
+                    floor = {}
                     for sigma_mm in FLOOR_MM:
-                        row[f'floor_iou_{sigma_mm}mm'], row[f'floor_exact_{sigma_mm}mm'] = \
+                        floor[f'floor_iou_{sigma_mm}mm'], floor[f'floor_exact_{sigma_mm}mm'] = \
                             _moved_iou(sim, sigma_mm * 1e-3, seed * 100 + step)
-                    rows.append(row)
+                    for name, variation_of in variations.items():
+                        variation = variation_of(challenge, setting, e, seed, step)
+                        if variation is None:
+                            continue
+                        photo = twin.photo(sim.chamber, seed=seed * 100 + step,
+                                           variation=variation, rig_seed=seed)
+                        m = pipes[name].measure(photo.bgr, cfg, sim.chamber.light.copy(),
+                                                target_of(sim), sim.chamber.steps)
+                        row = _compare(challenge, setting, seed, step, sim, outcome, m)
+                        row.update(floor, condition=name,
+                                   factors=' '.join(sorted(variation.factors)))
+                        rows.append(row)
     return rows
 
 
@@ -187,19 +248,27 @@ def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation
     return row
 
 
-def closed_loop(episodes: int, twin: PhotoTwin) -> dict[str, dict[str, float]]:
+def closed_loop(episodes: int, twin: PhotoTwin,
+                combinations: str | None = None) -> dict[str, dict[str, float]]:
     """Per challenge: mean return of the privileged oracle, of the same oracle on the
-    simulator's plants (``sim_view``) and on the camera's measurement (``camera``)."""
+    simulator's plants (``sim_view``) and on the camera's measurement (``camera``): of the
+    old twin's photos, or with ``combinations`` (tuning or held_out) each photo with its own
+    factor combination per episode (ids from 500,000 up within the range, apart from
+    fidelity's) and its rig drawn from the episode's seed."""
     out = {}
-    for challenge in CHALLENGES:
+    for ci, challenge in enumerate(CHALLENGES):
         returns = {'privileged': [], 'sim_view': [], 'camera': [], 'camera_estimate': []}
         refused = 0
         for e in range(episodes):
             setting = ('easy', 'hard')[e % 2]
             cfg = SimConfig(challenge=challenge, setting=setting)
             seed = 2000 + e
+            variation = None
+            if combinations is not None:
+                first = 500_000 + (HELD_OUT_FIRST if combinations == 'held_out' else 0)
+                variation = Variation.combination(first + ci * 1000 + e)
             for mode in ('privileged', 'sim_view', 'camera'):
-                total, estimate, misses = _loop_episode(cfg, seed, mode, twin)
+                total, estimate, misses = _loop_episode(cfg, seed, mode, twin, variation)
                 returns[mode].append(total)
                 refused += misses
                 if mode == 'camera':
@@ -211,8 +280,8 @@ def closed_loop(episodes: int, twin: PhotoTwin) -> dict[str, dict[str, float]]:
     return out
 
 
-def _loop_episode(cfg: SimConfig, seed: int, mode: str,
-                  twin: PhotoTwin) -> tuple[float, float, int]:
+def _loop_episode(cfg: SimConfig, seed: int, mode: str, twin: PhotoTwin,
+                  variation: Variation | None = None) -> tuple[float, float, int]:
     """One episode; returns (the simulator's return, the camera's estimate of it, refused
     photos). A refused photo leaves the oracle with the last view it had (none: stay)."""
     sim = Simulation(cfg)
@@ -231,7 +300,8 @@ def _loop_episode(cfg: SimConfig, seed: int, mode: str,
         if mode == 'sim_view':
             view = oracle_chamber(plant_view(sim.chamber.state), cfg)
         elif mode == 'camera':
-            photo = twin.photo(sim.chamber, seed=seed * 100 + step)
+            photo = twin.photo(sim.chamber, seed=seed * 100 + step,
+                               variation=variation, rig_seed=seed)
             m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
                              sim.chamber.steps)
             if m.ok:
@@ -287,32 +357,113 @@ def _speed_line(split: dict[str, float]) -> str:
 PipelineParamsDefault = Pipeline().params  # the defaults camera_node starts with
 
 
+def headline(rows: list[dict]) -> dict[str, float]:
+    """The issue's figures of a set of photos: IoU (refused = 0), tips within 1 cm (recall
+    over all photos, precision over accepted ones), reward MAE (refused = reward 0),
+    accept_precision (of accepted photos, those whose reward is within ``ACCEPT_WITHIN`` of
+    the simulator's) and refused (of photos of grown plants, step >= ``GROWN_STEP``)."""
+    ok = [r for r in rows if r['ok']]
+    grown = [r for r in rows if r['step'] >= GROWN_STEP]
+    iou = np.array([r['iou'] for r in rows])
+    return {
+        'photos': len(rows),
+        'iou_mean': float(iou.mean()), 'iou_p5': float(np.percentile(iou, 5)),
+        'tips_1cm': sum(r['tips_1cm'] for r in rows) / max(1, sum(r['sim_tips'] for r in rows)),
+        'tips_precision': sum(r['tip_precision'] for r in ok)
+        / max(1, sum(r['cam_tips'] for r in ok)),
+        'reward_mae': float(np.mean([abs(r['sim_reward'] - r['cam_reward']) for r in rows])),
+        'accept_precision': sum(abs(r['sim_reward'] - r['cam_reward']) <= ACCEPT_WITHIN
+                                for r in ok) / max(1, len(ok)),
+        'refused': sum(not r['ok'] for r in grown) / max(1, len(grown)),
+    }
+
+
+def _figures(h: dict[str, float]) -> str:
+    return (f'iou_mean={h["iou_mean"]:.3f} iou_p5={h["iou_p5"]:.3f} '
+            f'tips_1cm={h["tips_1cm"]:.3f} tips_precision={h["tips_precision"]:.3f} '
+            f'reward_mae={h["reward_mae"]:.4f} accept_precision={h["accept_precision"]:.3f} '
+            f'refused={h["refused"]:.3f}')
+
+
+def _print_cells(rows: list[dict]) -> None:
+    for challenge in CHALLENGES:
+        for setting in ('easy', 'hard'):
+            cell = [r for r in rows if r['challenge'] == challenge and r['setting'] == setting]
+            if cell:
+                print(f'  {challenge:10s} {setting}: ' + _cell_line(cell))
+
+
+def _print_loop(loop: dict[str, dict[str, float]], label: str) -> None:
+    for challenge, f in loop.items():
+        print(f'closed loop {label} {challenge:10s}: privileged oracle {f["privileged"]:.2f}, '
+              f'the same oracle on the simulator\'s plants {f["sim_view"]:.2f}, on the '
+              f'camera\'s {f["camera"]:.2f} (camera\'s own estimate {f["camera_estimate"]:.2f}'
+              f'); ratio {f["ratio"]:.3f}; refused photos {f["refused"]}')
+
+
+def _print_factors(rows: list[dict]) -> None:
+    """Each factor on its own against the old twin on the same photos (same seeds)."""
+    base = {(r['challenge'], r['setting'], r['seed'], r['step']): r
+            for r in rows if r['condition'] == 'old_twin'}
+    print('factor effects (one factor on, the rest as the old twin; the old twin on the same '
+          'photos in brackets):')
+    for name in FACTORS:
+        mine = [r for r in rows if r['condition'] == name]
+        if not mine:
+            continue
+        ref = [base[(r['challenge'], r['setting'], r['seed'], r['step'])] for r in mine]
+        h, o = headline(mine), headline(ref)
+        reasons = sorted({r['error'].split(':')[0] for r in mine if not r['ok']})
+        print(f'  {name:12s} ' + ' '.join(
+            f'{k}={h[k]:.3f}({o[k]:.3f})' for k in
+            ('iou_mean', 'tips_1cm', 'tips_precision', 'reward_mae', 'accept_precision',
+             'refused')) + (f' refusals: {", ".join(reasons)}' if reasons else ''))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--episodes', type=int, default=4, help='fidelity episodes per cell')
+    parser.add_argument('--factor-episodes', type=int, default=1,
+                        help='of those, episodes photographed with each factor on its own')
     parser.add_argument('--loop-episodes', type=int, default=20,
                         help='closed-loop episodes per challenge (half easy, half hard)')
+    parser.add_argument('--loop-episodes-varied', type=int, default=4,
+                        help='closed-loop episodes per challenge on the varied twin')
     parser.add_argument('--speed-photos', type=int, default=60)
+    parser.add_argument('--combinations', choices=('held_out', 'tuning'), default='held_out',
+                        help="the varied twin's factor combinations: held_out (the reported "
+                        'figures; never used while tuning) or tuning (for development)')
+    parser.add_argument('--factors', default=','.join(FACTORS),
+                        help='the factors measured one at a time (comma-separated)')
+    parser.add_argument('--quick', action='store_true',
+                        help='for development: 1 episode per cell, steps 12, 30, 50, 2 loop '
+                        'episodes, 10 speed photos')
     parser.add_argument('--only-speed', action='store_true', help='skip fidelity and loop')
     parser.add_argument('--json', help='write every figure here')
     args = parser.parse_args(argv)
+    steps = PHOTO_STEPS
+    if args.quick:
+        args.episodes, args.factor_episodes, steps = 1, 1, (12, 30, 50)
+        args.loop_episodes, args.loop_episodes_varied, args.speed_photos = 2, 2, 10
     assert set(CHALLENGES) <= set(tasks.names())
     twin = PhotoTwin(MarkerLayout())
     if args.only_speed:
         print(_speed_line(speed(args.speed_photos, twin)))
         return 0
     started = time.time()
-    rows = fidelity(args.episodes, twin)
-    iou = np.array([r['iou'] for r in rows])
-    tips = sum(r['tips_1cm'] for r in rows) / max(1, sum(r['sim_tips'] for r in rows))
-    mae = float(np.mean([abs(r['sim_reward'] - r['cam_reward']) for r in rows]))
+    factors = tuple(f for f in args.factors.split(',') if f)
+    unknown = sorted(set(factors) - set(FACTORS))
+    if unknown:
+        parser.error(f'--factors: unknown {unknown}; known: {",".join(FACTORS)}')
+    all_rows = fidelity(args.episodes, twin, steps, args.factor_episodes, args.combinations,
+                        factors)
+    rows = [r for r in all_rows if r['condition'] == 'old_twin']
+    varied = [r for r in all_rows if r['condition'] == args.combinations]
     refused = [r for r in rows if not r['ok']]
-    print(f'fidelity: {len(rows)} photos, {len(refused)} refused, '
-          f'{time.time() - started:.0f} s')
-    for challenge in CHALLENGES:
-        for setting in ('easy', 'hard'):
-            cell = [r for r in rows if r['challenge'] == challenge and r['setting'] == setting]
-            print(f'  {challenge:10s} {setting}: ' + _cell_line(cell))
+    print(f'fidelity: {len(all_rows)} photos ({len(rows)} of the old twin, {len(varied)} of '
+          f'{args.combinations} factor combinations), {time.time() - started:.0f} s')
+    print('old twin:')
+    _print_cells(rows)
     for mm in FLOOR_MM:
         floor = np.array([r[f'floor_iou_{mm}mm'] for r in rows])
         exact = np.array([r[f'floor_exact_{mm}mm'] for r in rows if r['challenge'] == 'shape'])
@@ -322,23 +473,41 @@ def main(argv: list[str] | None = None) -> int:
     for r in refused:
         print(f'  refused: {r["challenge"]} {r["setting"]} seed {r["seed"]} step {r["step"]}: '
               f'{r["error"]}')
+    print(f'{args.combinations} factor combinations (ids from '
+          f'{HELD_OUT_FIRST if args.combinations == "held_out" else 0}, one per episode):')
+    _print_cells(varied)
+    reasons: dict[str, int] = {}
+    for r in varied:
+        if not r['ok']:
+            key = r['error'].split(' (')[0][:70]
+            reasons[key] = reasons.get(key, 0) + 1
+    for key, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
+        print(f'  refused x{n}: {key}')
+    _print_factors(all_rows)
     loop = closed_loop(args.loop_episodes, twin) if args.loop_episodes else {}
-    for challenge, f in loop.items():
-        print(f'closed loop {challenge:10s}: privileged oracle {f["privileged"]:.2f}, the same '
-              f'oracle on the simulator\'s plants {f["sim_view"]:.2f}, on the camera\'s '
-              f'{f["camera"]:.2f} (camera\'s own estimate {f["camera_estimate"]:.2f}); ratio '
-              f'{f["ratio"]:.3f}; refused photos {f["refused"]}')
+    _print_loop(loop, 'old twin')
+    loop_varied = closed_loop(args.loop_episodes_varied, twin, args.combinations) \
+        if args.loop_episodes_varied else {}
+    _print_loop(loop_varied, args.combinations)
     split = speed(args.speed_photos, twin)
     print(_speed_line(split))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'fidelity': rows, 'closed_loop': loop, 'speed_ms': split}, f, indent=1)
+            json.dump({'fidelity': all_rows, 'closed_loop': loop,
+                       'closed_loop_varied': loop_varied, 'speed_ms': split}, f, indent=1)
     ratio = min((f['ratio'] for f in loop.values()), default=float('nan'))
+    ratio_varied = min((f['ratio'] for f in loop_varied.values()), default=float('nan'))
+    h, hv = headline(rows), headline(varied)
     shape = np.array([r['iou_exact'] for r in rows if r['challenge'] == 'shape'])
-    print(f'camera: iou_mean={iou.mean():.3f} iou_p5={np.percentile(iou, 5):.3f} '
-          f'tips_1cm={tips:.3f} reward_mae={mae:.4f} closed_loop={ratio:.3f} '
+    print(f'camera {args.combinations}: {_figures(hv)} closed_loop={ratio_varied:.3f} '
+          f'ms_per_photo={split["total"]:.1f}')
+    print(f'camera: iou_mean={h["iou_mean"]:.3f} iou_p5={h["iou_p5"]:.3f} '
+          f'tips_1cm={h["tips_1cm"]:.3f} reward_mae={h["reward_mae"]:.4f} '
+          f'closed_loop={ratio:.3f} '
           f'ms_per_photo={split["total"]:.1f} shape_exact_iou_mean={shape.mean():.3f} '
-          f'shape_exact_iou_p5={np.percentile(shape, 5):.3f}')
+          f'shape_exact_iou_p5={np.percentile(shape, 5):.3f} '
+          f'tips_precision={h["tips_precision"]:.3f} '
+          f'accept_precision={h["accept_precision"]:.3f} refused={h["refused"]:.3f}')
     return 0
 
 

@@ -21,9 +21,16 @@ from growspace_camera.errors import CameraError, EXPOSURE
 SATURATED = 250  # grey level from which a pixel counts as clipped
 EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
+EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
+WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
+FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
+WARM = 0.08  # r - b on chromatic coordinates from which a dark pixel counts fully as bark
+BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
+FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked against those above
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
+_WARMTH = np.array([[-1.0, 0.0, 1.0]], np.float32)  # r - b
 
 
 @dataclass(frozen=True)
@@ -161,34 +168,73 @@ def greenness(bgr: np.ndarray) -> np.ndarray:
     return cv2.divide(cv2.transform(bgr, _EXCESS_GREEN), total)
 
 
-def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float) -> np.ndarray:
+def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
+               edge_m: float = EDGE_KERNEL_M,
+               fill: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Divide out the light falling on the backdrop, estimated away from the plant.
 
-    The backdrop is neutral and everywhere behind the plant, so its local average colour is
-    the local light (the white photo light, the grow lamp's cast where it falls, vignetting).
+    The backdrop is neutral and everywhere behind the plant, so its local colour is the local
+    light (the white photo light, the grow lamp's cast where it falls, vignetting). A mean
+    over a window that straddles a lamp's hard edge (an LED bar's cut-off) would mix the
+    light of both sides and leave a coloured line along the edge, which reads as a stem; so
+    the light is the median of the backdrop over a window of ``edge_m`` (a median keeps a
+    step where it is), with the pixels that may be plant first filled in from ``fill`` (an
+    earlier estimate of the light) or a wide mean of the backdrop around them.
 
     Args:
         bgr: (rows, cols, 3) float32 rectified photo.
         exclude: (rows, cols) bool, pixels that may be plant (left out of the estimate).
         pixel_m: Grid pixel [m].
+        edge_m: Side of the median window [m]: lamp bands narrower than half of it, and
+            plant parts wider than half of it that ``exclude`` misses, are not followed.
+        fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
 
     Returns:
-        The photo as if lit evenly, at its backdrop's mean grey level (float32).
+        The photo as if lit evenly at its backdrop's mean grey level (float32), that level,
+        and the light estimated (float32 BGR).
     """
-    size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
     backdrop = (~exclude).astype(np.float32)
     if not backdrop.any():
-        return bgr
-    weight = cv2.blur(backdrop, size)
-    light = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
-    # Where the window holds (almost) no backdrop, the backdrop's average light stands in.
-    thin = weight < 0.05
-    light = cv2.divide(light, cv2.merge((np.maximum(weight, 1e-6),) * 3))
-    light[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
-    np.maximum(light, 1.0, out=light)
+        return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
+    if not exclude.any():
+        fill = bgr
+    elif fill is None:
+        size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
+        weight = cv2.blur(backdrop, size)
+        fill = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
+        # Where the window holds (almost) no backdrop, the backdrop's average light stands in.
+        thin = weight < 0.05
+        fill = cv2.divide(fill, cv2.merge((np.maximum(weight, 1e-6),) * 3))
+        fill[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
+    filled = np.where(exclude[..., None], fill, bgr)
+    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
+    # may hold a little soil. At full size: a median of a shrunk photo, enlarged, spreads a
+    # hard edge over a shrunk pixel or two, which showed (twin bench: shrunk by 2, IoU 0.92
+    # -> 0.88 and refusals on hard-edged lamps); the two medians cost 10-20 ms each.
+    k = max(3, int(round(edge_m / pixel_m)) | 1)
+    h = k // 2
+    padded = cv2.copyMakeBorder(np.clip(filled, 1.0, 255.0).astype(np.uint8), h, h, h, h,
+                                cv2.BORDER_REFLECT_101)
+    light = cv2.medianBlur(padded, k)[h:-h, h:-h].astype(np.float32)
     # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
     level = float(np.mean(cv2.mean(light)[:3]))
-    return cv2.divide(bgr, light, scale=level)
+    return cv2.divide(bgr, light, scale=level), level, light
+
+
+def tissue(bgr: np.ndarray, level: float) -> np.ndarray:
+    """How much each pixel of an evenly lit photo looks like plant tissue, green or brown.
+
+    Green tissue: excess green (``greenness``). Brown, woody tissue is not greener than the
+    backdrop, but it is darker and warmer (red above blue): its darkness below the backdrop's
+    ``level``, counted fully once its warmth (r - b on chromatic coordinates) reaches
+    ``WARM``. A neutral dark pixel (wood grain, a shadow, a fold) is not warm, so it stays low.
+    """
+    exg = greenness(bgr)
+    total = cv2.transform(bgr, _SUM)
+    warm = cv2.divide(cv2.transform(bgr, _WARMTH), total + 30.0)
+    dark = 1.0 - total / (3.0 * max(level, 1.0))
+    brown = np.clip(warm * (1.0 / WARM), 0.0, 1.0) * np.clip(dark, 0.0, 1.0) * BROWN_WEIGHT
+    return np.maximum(exg, brown)
 
 
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
@@ -216,9 +262,18 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     gain = float(balance.mean()) / np.maximum(balance, 1.0)
     bgr = cv2.multiply(bgr, (*gain.tolist(), 0.0))
     first = greenness(bgr)
-    rough = (first > max(_otsu(first), params.min_greenness)).astype(np.uint8)
-    rough = cv2.dilate(rough, np.ones((5, 5), np.uint8)).astype(bool)
-    exg = greenness(cv2.GaussianBlur(flat_field(bgr, rough, params.pixel_m), (3, 3), 0))
+    rough = (first > max(_otsu(first), params.min_greenness)).view(np.uint8)
+    rough = _without_floods(cv2.dilate(rough, np.ones((5, 5), np.uint8)).view(bool))
+    # Two passes: a wide median first (a thick brown trunk, which greenness missed, is less
+    # than half of its window), then a narrower one, which follows closer lamp bands, with
+    # what the first found left out.
+    flat, level, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
+    found = tissue(flat, level)
+    found = found > max(_otsu(found), params.min_greenness)
+    rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
+    flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
+    exg = tissue(cv2.GaussianBlur(flat, (3, 3), 0), level)
+    _floor_rows(exg, params.pixel_m)
     # Otsu splits two classes; with two plants of different greens it splits the backdrop
     # from the greener one and loses the other. Whatever stands clearly out of the
     # backdrop's own noise is plant, so the threshold never exceeds that level.
@@ -243,6 +298,27 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
         plant[:] = False
     return Segmentation(plant, float(threshold), contrast, specks,
                         _coverage(exg, plant, centre))
+
+
+def _without_floods(rough: np.ndarray) -> np.ndarray:
+    """A rough mask less its regions wider than ``FLOOD_FRACTION`` of the chamber: before the
+    flat field, the part of the backdrop that the grow lamp does not reach looks green
+    beside the part it does (the photo is balanced on their mix); that is light, not plant."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(rough.view(np.uint8),
+                                                               connectivity=8)
+    flood = stats[:, cv2.CC_STAT_AREA] > FLOOD_FRACTION * rough.size
+    flood[0] = False
+    return rough & ~flood[labels] if flood.any() else rough
+
+
+def _floor_rows(index: np.ndarray, pixel_m: float) -> None:
+    """The bottom rows of the grid border the soil, which is dark and brown too, and which
+    blur and a fit off by a millimetre bring into them: there a pixel counts as tissue only
+    as far as the pixel ``FLOOR_M`` above it does (a stem goes on down; the soil line has
+    nothing above it). In place."""
+    rows = index.shape[0]
+    k = min(rows - 1, max(1, int(np.ceil(FLOOR_M / pixel_m))))
+    np.minimum(index[rows - k:], index[rows - 2 * k:rows - k], out=index[rows - k:])
 
 
 def _coverage(exg: np.ndarray, plant: np.ndarray, backdrop: float) -> np.ndarray:

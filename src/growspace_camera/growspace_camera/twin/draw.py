@@ -5,8 +5,11 @@ with stems of varying width and colour, the white photo light and the grow lamp'
 drawn on a millimetre canvas of the plane; one perspective warp (the pinhole pose of
 ``twin.pose``) puts it in the photo, which then gets vignetting, optical blur, shot and read
 noise and JPEG compression. Every draw comes from one ``np.random.Generator`` in a fixed order,
-so a seed gives the same bytes. This code shares nothing with the pipeline that measures the
-photos: a shared mistake would otherwise pass unseen.
+so a seed gives the same bytes. A ``Variation`` (``twin.variation``) turns on factors in which
+real rigs differ (hard lamp edges, backdrops, brown stems, leaves, lens distortion, ...); their
+values come from a second generator of the same seed, so the default twin is unchanged. This
+code shares nothing with the pipeline that measures the photos: a shared mistake would
+otherwise pass unseen.
 """
 
 from __future__ import annotations
@@ -20,12 +23,11 @@ import numpy as np
 
 from growspace_camera.markers import MarkerLayout
 from growspace_camera.twin.pose import look_at_plane, Pose
+from growspace_camera.twin.variation import draw_rig, jitter_for, RigDraw, Variation, VARY_SALT
 from growspace_sim.core.chamber import Chamber
 
 CANVAS_M = 0.001  # canvas pixel [m]: about one photo pixel at the default distance
 LIGHT_GRID_M = 0.01  # resolution of the illumination map [m]
-LAMP_EDGE_M = 0.015  # soft edge of the grow lamp's light (sigma) [m]
-LAMP_BGR = np.array([0.85, 0.3, 1.0], np.float32)  # red + blue LEDs: magenta
 POT_DEPTH_M, POT_TOP_M, POT_BOTTOM_M = 0.08, 0.10, 0.075
 SHIFT = 4  # cv2 fixed-point bits for sub-pixel drawing
 BACKDROP_LEVEL = (190.0, 225.0)  # grey level of the backdrop under the photo light alone
@@ -83,16 +85,21 @@ class PhotoTwin:
         layout: The markers on the plane (what ``growspace-camera markers`` printed).
         jitter: The ranges of the drawn conditions.
         size: Photo (width, height) [px].
+        variation: The factors in which rigs differ that photos draw (default: none, the
+            twin the pipeline was built with).
     """
 
     def __init__(self, layout: MarkerLayout, jitter: TwinJitter = TwinJitter(),
-                 size: tuple[int, int] = (1920, 1080)) -> None:
+                 size: tuple[int, int] = (1920, 1080),
+                 variation: Variation | None = None) -> None:
         self.layout = layout
         self.jitter = jitter
         self.size = size
+        self.variation = variation or Variation()
 
     def photo(self, chamber: Chamber, seed: int, hidden: tuple[int, ...] = (),
-              plant: bool = True) -> TwinPhoto:
+              plant: bool = True, variation: Variation | None = None,
+              rig_seed: int | None = None) -> TwinPhoto:
         """Photograph the chamber as it is now.
 
         Args:
@@ -100,30 +107,51 @@ class PhotoTwin:
             seed: Decides the conditions, the textures and the noise.
             hidden: Marker ids covered by something (a dark card).
             plant: False draws the empty pots (the plant is not drawn).
+            variation: This photo's factors (default: the twin's own).
+            rig_seed: With a variation, draws what belongs to the rig rather than to the
+                photo (the camera's pose, the factors' values: backdrop, lamp, lens, the
+                markers' wear) from this seed: a rig's camera stays put for an episode, so
+                the pipeline's held plane fit meets the photos it is made for. None: all
+                from ``seed`` (the default twin always: each photo its own pose).
         """
         rng = np.random.default_rng(seed)
-        j = self.jitter
+        variation = self.variation if variation is None else variation
+        j = jitter_for(self.jitter, variation)
         cfg = chamber.cfg
+        fixed = rig_seed is not None and bool(variation.factors)
+        rig = draw_rig(rig_seed if fixed else seed, variation, cfg.plant_count, seed)
         x0, z0, x1, z1 = self._board(cfg.chamber_width, cfg.chamber_height)
-        pose = self._pose(rng, (x0, z0, x1, z1))
+        pose = self._pose(rng, (x0, z0, x1, z1), j)
+        if fixed:  # the photo's own draw is made all the same, so the rest stay aligned
+            pose = self._pose(np.random.default_rng([rig_seed, VARY_SALT, 3]),
+                              (x0, z0, x1, z1), j)
         canvas = _backdrop(rng, x0, z0, x1, z1)
+        level = BACKDROP_LEVEL[1]
+        if rig.backdrop != 'grey':
+            canvas, level = _rig_backdrop(np.random.default_rng([seed, VARY_SALT, 1]),
+                                          canvas.shape, rig.backdrop)
         to_canvas = _Canvas(x0, z1)
         roots = chamber.pos[:cfg.plant_count]
         for x in roots.real:
-            _pot(canvas, to_canvas, rng, float(x))
+            _pot(canvas, to_canvas, rng, float(x), rig)
         for index, marker_id in enumerate(self.layout.ids):
-            _marker(canvas, to_canvas, self.layout, index, marker_id in hidden)
+            _marker(canvas, to_canvas, self.layout, index, marker_id in hidden, rig)
         if plant:
-            _plant(canvas, to_canvas, rng, chamber, j)
-        lit = _illumination(canvas.shape, to_canvas, rng, chamber, j)
+            _plant(canvas, to_canvas, rng, chamber, j, rig)
+            if rig.leaves:
+                _leaves(canvas, to_canvas, np.random.default_rng([seed, VARY_SALT, 2]),
+                        chamber, rig)
+        lit = _illumination(canvas.shape, to_canvas, rng, chamber, j, rig)
         lamp = float(lit.max() - 1.0)
-        brightest = BACKDROP_LEVEL[1] * float(lit.max())  # the backdrop where most light falls
+        brightest = level * float(lit.max())  # the backdrop where most light falls
         exposure = float(rng.uniform(*j.exposure)) * WHITE / brightest
         lit *= canvas
         photo = _room(rng, self.size)
         warp = pose.homography() @ to_canvas.to_plane
         cv2.warpPerspective(lit, warp, self.size, photo, cv2.INTER_LINEAR,
                             cv2.BORDER_TRANSPARENT)
+        if rig.distortion_k1:
+            photo = _distort(photo, rig.distortion_k1)
         conditions = {'exposure': exposure, 'lamp': lamp}
         photo *= exposure * _vignette(self.size, float(rng.uniform(*j.vignette)))[..., None]
         blur = float(rng.uniform(*j.blur_px))
@@ -152,8 +180,8 @@ class PhotoTwin:
         return (min(0.0, corners[:, 0].min()) - pad, min(-POT_DEPTH_M, corners[:, 1].min()) - pad,
                 max(width, corners[:, 0].max()) + pad, max(height, corners[:, 1].max()) + pad)
 
-    def _pose(self, rng: np.random.Generator, board: tuple[float, ...]) -> Pose:
-        j = self.jitter
+    def _pose(self, rng: np.random.Generator, board: tuple[float, ...],
+              j: TwinJitter) -> Pose:
         x0, z0, x1, z1 = board
         hfov = float(rng.uniform(*j.hfov_deg))
         w, h = self.size
@@ -214,19 +242,65 @@ def _room(rng: np.random.Generator, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
 
 
-def _pot(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, x: float) -> None:
-    """A terracotta pot below the floor line, its soil up to z = 0."""
+def _rig_backdrop(rng: np.random.Generator, shape: tuple[int, ...],
+                  kind: str) -> tuple[np.ndarray, float]:
+    """A backdrop of another kind than the grey board; returns it and its brightest level.
+
+    white: a near-white board; wood: plywood, warm, with grain along x; fabric: a tinted
+    weave with folds; paint: a light wall with uneven coats and brush streaks.
+    """
+    h, w = shape[:2]
+
+    def field(cells_m: float, amount: float) -> np.ndarray:  # smooth noise, +- amount
+        ch, cw = int(h * CANVAS_M / cells_m) + 2, int(w * CANVAS_M / cells_m) + 2
+        coarse = rng.standard_normal((ch, cw)).astype(np.float32)
+        return amount * cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
+
+    if kind == 'white':
+        base = rng.uniform(225.0, 245.0) * (1.0 + rng.uniform(-0.02, 0.02, 3))
+        shade = 1.0 + field(0.05, 0.02)
+    elif kind == 'wood':
+        base = np.array([rng.uniform(95, 135), rng.uniform(150, 185), rng.uniform(195, 225)])
+        rows = np.arange(h, dtype=np.float32)[:, None]
+        period = rng.uniform(4.0, 14.0)  # mm between grain lines
+        cols = np.arange(w, dtype=np.float32)[None, :]
+        phase = field(0.04, 6.0) + cols * rng.uniform(-0.05, 0.05)  # wavy, slanted lines
+        grain = np.sin(2 * np.pi * (rows + phase) / period)
+        shade = 1.0 + rng.uniform(0.04, 0.12) * grain + field(0.1, 0.05)
+    elif kind == 'fabric':
+        tints = ((205, 215, 220), (215, 205, 190), (190, 200, 205), (200, 200, 200))
+        base = np.array(tints[int(rng.integers(len(tints)))], float) * rng.uniform(0.85, 1.05)
+        weave = rng.uniform(1.5, 3.0)  # mm
+        y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+        shade = (1.0 + 0.04 * np.sin(2 * np.pi * x / weave) * np.sin(2 * np.pi * y / weave)
+                 + field(0.12, 0.07))
+    else:  # paint
+        base = rng.uniform(200.0, 235.0) * (1.0 + rng.uniform(-0.03, 0.03, 3))
+        streaks = cv2.resize(rng.standard_normal((8, w)).astype(np.float32), (w, h),
+                             interpolation=cv2.INTER_LINEAR)
+        shade = 1.0 + field(0.15, 0.06) + field(0.03, 0.02) + 0.02 * streaks
+    board = shade[..., None].astype(np.float32) * np.asarray(base, np.float32)
+    grain = rng.standard_normal((h // 2 + 1, w // 2 + 1), dtype=np.float32) * 3.0
+    board += cv2.resize(grain, (w, h), interpolation=cv2.INTER_LINEAR)[..., None]
+    return np.clip(board, 0, 255).astype(np.uint8), float(np.max(base))
+
+
+def _pot(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, x: float,
+         rig: RigDraw) -> None:
+    """A pot below the floor line (terracotta unless the rig's), its soil up to z = 0."""
     top, bottom = 0.5 * POT_TOP_M, 0.5 * POT_BOTTOM_M
     body = np.array([(x - top, 0.0), (x + top, 0.0), (x + bottom, -POT_DEPTH_M),
                      (x - bottom, -POT_DEPTH_M)])
     colour = (np.array([60.0, 95.0, 175.0]) * rng.uniform(0.85, 1.1)).tolist()
+    if rig.pot_bgr is not None:
+        colour = list(rig.pot_bgr)
     cv2.fillConvexPoly(canvas, to.fixed(body), colour, cv2.LINE_AA, SHIFT)
     soil = np.array([(x - top, 0.0), (x + top, 0.0), (x + top, -0.012), (x - top, -0.012)])
-    cv2.fillConvexPoly(canvas, to.fixed(soil), (35, 45, 60), cv2.LINE_AA, SHIFT)
+    cv2.fillConvexPoly(canvas, to.fixed(soil), tuple(rig.soil_bgr), cv2.LINE_AA, SHIFT)
 
 
 def _marker(canvas: np.ndarray, to: _Canvas, layout: MarkerLayout, index: int,
-            hidden: bool) -> None:
+            hidden: bool, rig: RigDraw) -> None:
     """The printed marker: a white quiet zone, then its black cells; or a card over it."""
     cells = layout.bits(layout.ids[index])
     n = cells.shape[0]
@@ -237,20 +311,30 @@ def _marker(canvas: np.ndarray, to: _Canvas, layout: MarkerLayout, index: int,
     paper = np.array([(left - quiet, top + quiet), (left + layout.side + quiet, top + quiet),
                       (left + layout.side + quiet, top - layout.side - quiet),
                       (left - quiet, top - layout.side - quiet)])
-    cv2.fillConvexPoly(canvas, to.fixed(paper), (245, 245, 245), cv2.LINE_AA, SHIFT)
+    cv2.fillConvexPoly(canvas, to.fixed(paper), (rig.marker_paper,) * 3, cv2.LINE_AA, SHIFT)
     for r, c in zip(*np.nonzero(cells)):
         a = (left + c * unit, top - r * unit)
         quad = np.array([a, (a[0] + unit, a[1]), (a[0] + unit, a[1] - unit),
                          (a[0], a[1] - unit)])
-        cv2.fillConvexPoly(canvas, to.fixed(quad), (18, 18, 18), cv2.LINE_AA, SHIFT)
+        cv2.fillConvexPoly(canvas, to.fixed(quad), (rig.marker_black,) * 3, cv2.LINE_AA, SHIFT)
+    if rig.marker_covered == index:  # a strip of brown tape over the marker's left edge
+        reach = left - quiet + rig.marker_cover * layout.side
+        low = top - layout.side - quiet
+        tape = np.array([(left - quiet, top + quiet), (reach, top + quiet), (reach, low),
+                         (left - quiet, low)])
+        cv2.fillConvexPoly(canvas, to.fixed(tape), (80, 130, 165), cv2.LINE_AA, SHIFT)
     if hidden:
         card = paper + np.array([0.2 * unit, -0.3 * unit])
         cv2.fillConvexPoly(canvas, to.fixed(card), (70, 75, 80), cv2.LINE_AA, SHIFT)
 
 
 def _plant(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: Chamber,
-           j: TwinJitter) -> None:
-    """Each segment a tapered quad between its nodes, each node a disc closing the joint."""
+           j: TwinJitter, rig: RigDraw) -> None:
+    """Each segment a tapered quad between its nodes, each node a disc closing the joint.
+
+    With the rig's ``woody`` the older, thicker parts turn to its bark's brown; with its
+    ``taper`` each segment narrows from its parent's width to its own, and a plant's widths
+    from its base (wider) to its top."""
     cfg, n = chamber.cfg, chamber.n_nodes
     pos, parent, plant = chamber.pos[:n], chamber.parent[:n], chamber.plant[:n]
     thickness = chamber.thickness()
@@ -261,11 +345,18 @@ def _plant(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: C
     jitter = rng.uniform(1.0 - j.segment_width, 1.0 + j.segment_width, n)
     shade = rng.uniform(-0.12, 0.12, n)
     tips = ~chamber.state.has_child[:n]
+    top = max(float(pos.imag.max()), 0.01)
     for node in range(plants, n):
         p = plant[node]
         half = 0.5 * thickness[node] * widths[p] * jitter[node]
         end = 0.35 * half if tips[node] else half
         a, b = pos[parent[node]], pos[node]
+        if rig.taper:  # from the parent's width at a to this one's at b, wider low down
+            lift = 1.0 + rig.taper * (0.5 - np.array([a.imag, b.imag]) / top)
+            start = 0.5 * thickness[parent[node]] * widths[p] if parent[node] >= plants \
+                else 1.3 * half
+            half, end = start * lift[0], (0.35 * half if tips[node] else half) * lift[1]
+            half, end = max(half, end), max(end, 0.0003)
         d = b - a
         if abs(d) == 0.0:
             continue
@@ -276,6 +367,12 @@ def _plant(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: C
         # Older, thicker stems turn a little yellow-brown, as real ones do.
         woody = min(0.25, 0.05 * (thickness[node] / thickness.min() - 1.0))
         colour = _bgr((h - 12.0 * woody, s * (1.0 - 0.3 * woody), v * (1.0 + shade[node])))
+        if rig.woody is not None:  # bark: the thicker (older) the segment, the browner
+            age = min(1.0, (thickness[node] / thickness.min() - 1.0) / 1.5)
+            mix = float(np.clip(rig.woody[p] * (0.5 + age), 0.0, 1.0))
+            bark = rig.brown_hsv[p]
+            colour = _bgr(((1 - mix) * h + mix * bark[0], (1 - mix) * s + mix * bark[1],
+                           ((1 - mix) * v + mix * bark[2]) * (1.0 + shade[node])))
         corners = to.fixed(np.column_stack((quad.real, quad.imag)))
         cv2.fillConvexPoly(canvas, corners, colour, cv2.LINE_AA, SHIFT)
         centre = to.fixed(np.array([(b.real, b.imag), (a.real, a.imag)]))
@@ -288,6 +385,54 @@ def _plant(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: C
                        SHIFT)
 
 
+def _leaves(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: Chamber,
+            rig: RigDraw) -> None:
+    """Leaves: at some nodes a petiole and an elliptic blade, some drooping (the lower ones
+    across the soil line), drawn after the stems so that some cover them."""
+    cfg, n = chamber.cfg, chamber.n_nodes
+    pos = chamber.pos[:n]
+    for node in range(cfg.plant_count, n):
+        if rng.random() > 0.5:
+            continue
+        b = pos[node]
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        droop = rng.random() < 0.35
+        angle = math.radians(rng.uniform(-85.0, -30.0) if droop else rng.uniform(-20.0, 60.0))
+        direction = complex(side * math.cos(angle), math.sin(angle))
+        petiole = rng.uniform(0.008, 0.025)
+        length = rng.uniform(0.03, 0.08) * (1.5 if droop and b.imag < 0.12 else 1.0)
+        width = length * rng.uniform(0.25, 0.5)
+        base = b + petiole * direction
+        green = _bgr((rng.uniform(38.0, 62.0), rng.uniform(120.0, 230.0),
+                      rng.uniform(80.0, 180.0)))
+        line = to.fixed(np.array([(b.real, b.imag), (base.real, base.imag)]))
+        thick = max(1, int(round(rng.uniform(0.0012, 0.003) / CANVAS_M)))
+        cv2.line(canvas, tuple(int(v) for v in line[0]), tuple(int(v) for v in line[1]), green,
+                 thick, cv2.LINE_AA, SHIFT)
+        t = np.linspace(0.0, math.pi, 24)  # a blade: pointed ends, widest in the middle
+        along = 0.5 * length * (1.0 - np.cos(t))
+        across = 0.5 * width * np.sin(t) ** 1.3
+        outline = np.concatenate((along + 1j * across, (along - 1j * across)[::-1]))
+        blade = base + outline * direction
+        cv2.fillPoly(canvas, [to.fixed(np.column_stack((blade.real, blade.imag)))], green,
+                     cv2.LINE_AA, SHIFT)
+
+
+def _distort(photo: np.ndarray, k1: float) -> np.ndarray:
+    """Radial lens distortion (k1 < 0 barrel, > 0 pincushion), on radii scaled by half the
+    photo's diagonal."""
+    h, w = photo.shape[:2]
+    x = (np.arange(w, dtype=np.float32) - 0.5 * (w - 1))
+    y = (np.arange(h, dtype=np.float32) - 0.5 * (h - 1))
+    half = 0.5 * math.hypot(w, h)
+    r2 = (x[None, :] ** 2 + y[:, None] ** 2) / half ** 2
+    # The photo pixel at distorted radius r shows what the pinhole puts at r (1 + k1 r^2).
+    gain = 1.0 + k1 * r2
+    map_x = (x[None, :] * gain + 0.5 * (w - 1)).astype(np.float32)
+    map_y = (y[:, None] * gain + 0.5 * (h - 1)).astype(np.float32)
+    return cv2.remap(photo, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
 def _bgr(hsv: tuple[float, float, float]) -> tuple[int, int, int]:
     h, s, v = hsv
     pixel = np.uint8([[[int(np.clip(h, 0, 179)), int(np.clip(s, 0, 255)),
@@ -297,27 +442,59 @@ def _bgr(hsv: tuple[float, float, float]) -> tuple[int, int, int]:
 
 
 def _illumination(shape: tuple[int, ...], to: _Canvas, rng: np.random.Generator,
-                  chamber: Chamber, j: TwinJitter) -> np.ndarray:
+                  chamber: Chamber, j: TwinJitter, rig: RigDraw) -> np.ndarray:
     """Per canvas pixel and channel, the light falling there: the white photo light (with a
-    white-balance error and a gentle gradient) plus the grow lamp's magenta cast."""
+    white-balance error, a gradient and the rig's hot spot) plus the grow lamp's cast (the
+    rig's colour, edge and bands; magenta and soft by default).
+
+    A hard edge (sharper than the light grid) is computed on the canvas itself, so that the
+    beam's cut-off is as sharp in the photo as the lens leaves it."""
     h, w = shape[:2]
     gh, gw = int(h * CANVAS_M / LIGHT_GRID_M) + 2, int(w * CANVAS_M / LIGHT_GRID_M) + 2
     xs = to.x0 + (np.arange(gw) + 0.5) * LIGHT_GRID_M
     zs = to.z1 - (np.arange(gh) + 0.5) * LIGHT_GRID_M
     x, z = np.meshgrid(xs, zs)
     balance = 1.0 + rng.uniform(-j.white_balance, j.white_balance, 3)
-    tilt = rng.uniform(-0.1, 0.1, 2)
+    tilt = rng.uniform(-0.1, 0.1, 2) * (rig.gradient / 0.1)
     white = 1.0 + tilt[0] * (x - x.mean()) + tilt[1] * (z - z.mean())
-    light = chamber.light
+    gain, hx, hz, radius = rig.hot_spot
+    if gain:
+        white += gain * np.exp(-0.5 * ((x - to.x0 - hx * (x.max() - x.min())) ** 2
+                                       + (z - to.z1 + hz * (z.max() - z.min())) ** 2)
+                               / radius ** 2)
     strength = float(rng.uniform(*j.lamp))
+    cast = np.asarray(rig.lamp_bgr, np.float32)
+    if rig.lamp_edge_m >= LIGHT_GRID_M and rig.lamp_bands == 1:  # soft: on the light grid
+        lamp = strength / (1.0 + np.exp(-_beam(x, z, chamber, rig)))
+        grid = white[..., None] * balance + lamp[..., None] * cast
+        return cv2.resize(grid.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+    grid = cv2.resize((white[..., None] * balance).astype(np.float32), (w, h),
+                      interpolation=cv2.INTER_LINEAR)
+    xs = to.x0 + (np.arange(w, dtype=np.float32) + 0.5) * CANVAS_M
+    zs = to.z1 - (np.arange(h, dtype=np.float32) + 0.5) * CANVAS_M
+    inside = np.clip(_beam(xs[None, :], zs[:, None], chamber, rig), -60.0, 60.0)
+    lamp = (strength / (1.0 + np.exp(-inside))).astype(np.float32)
+    grid += lamp[..., None] * cast
+    return grid
+
+
+def _beam(x: np.ndarray, z: np.ndarray, chamber: Chamber, rig: RigDraw) -> np.ndarray:
+    """How far (x, z) is inside the grow lamp's light, in edge widths (the argument of a
+    logistic edge): one beam, or bands (LED bars with dark gaps between them across it)."""
+    light, edge = chamber.light, rig.lamp_edge_m
     if light.spot:
-        inside = (light.radius - np.hypot(x - light.x, z - light.z)) / LAMP_EDGE_M
+        inside = (light.radius - np.hypot(x - light.x, z - light.z)) / edge
+        across, span = x - (light.x - light.radius), 2.0 * light.radius
     else:
-        inside = (0.5 * light.width - np.abs(x - light.x)) / LAMP_EDGE_M
-        inside = np.minimum(inside, (chamber.cfg.chamber_height + 0.02 - z) / LAMP_EDGE_M)
-    lamp = strength / (1.0 + np.exp(-inside))
-    grid = white[..., None] * balance + lamp[..., None] * LAMP_BGR
-    return cv2.resize(grid.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+        inside = (0.5 * light.width - np.abs(x - light.x)) / edge
+        inside = np.minimum(inside, (chamber.cfg.chamber_height + 0.02 - z) / edge)
+        across, span = x - (light.x - 0.5 * light.width), light.width
+    if rig.lamp_bands > 1:  # each bar lit over (1 - gap) of its pitch, dark between bars
+        pitch = span / rig.lamp_bands
+        offset = np.mod(across, pitch) - 0.5 * pitch
+        bar = (0.5 * (1.0 - rig.lamp_gap) * pitch - np.abs(offset)) / edge
+        inside = np.minimum(inside, bar)
+    return inside
 
 
 @functools.cache
