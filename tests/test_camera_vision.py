@@ -7,6 +7,7 @@ tests check the pipeline against an independent picture of the truth.
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import cv2
@@ -15,7 +16,7 @@ import pytest
 from skimage.filters import apply_hysteresis_threshold
 
 from growspace_camera.calibration import Calibrator, fit_plane
-from growspace_camera.errors import CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
+from growspace_camera.errors import BAD_INPUT, CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import Target
 from growspace_camera.oracle_view import candidate_points, oracle_chamber, plant_view
@@ -163,6 +164,26 @@ def test_black_or_white_photo_gives_an_error_and_no_reward(chamber, level):
     m = measure(Pipeline(), chamber, np.full((1080, 1920, 3), level, np.uint8))
     assert not m.ok and m.error.code == EXPOSURE
     assert m.reward == 0.0 and m.observation is None and m.state is None
+
+
+@pytest.mark.parametrize('photo_in, named', [
+    (None, 'got NoneType'),
+    (np.full((720, 1280), 128, np.uint8), r'shape \(720, 1280\): a grey photo'),
+    (np.full((720, 1280, 1), 128, np.uint8), r'shape \(720, 1280, 1\): a grey photo'),
+    (np.full((720, 1280, 4), 128, np.uint8), r'shape \(720, 1280, 4\): BGRA'),
+    (np.zeros((0, 0, 3), np.uint8), r'at least 16 x 16 px, got a uint8 array of shape \(0, 0'),
+    (np.zeros((0, 0), np.uint8), r'shape \(0, 0\)'),
+    (np.full((720, 1280, 3), 0.5), 'must be 8-bit .* got a float64 array'),
+    (np.full((720, 1280, 3), 128, np.uint16), 'must be 8-bit .* got a uint16 array'),
+    (np.full((720, 1280, 2), 128, np.uint8), r'shape \(720, 1280, 2\)'),
+    ([[1, 2, 3]], 'got list'),
+], ids=['none', 'grey', 'grey-1ch', 'bgra', 'empty', 'empty-2d', 'float', 'uint16',
+        '2ch', 'list'])
+def test_anything_but_an_8bit_bgr_photo_is_refused_naming_what_it_got(chamber, photo_in, named):
+    m = measure(Pipeline(), chamber, photo_in)
+    assert not m.ok and isinstance(m.error, CameraError) and m.error.code == BAD_INPUT
+    assert re.search(named, m.error.message), m.error.message
+    assert m.reward == 0.0 and m.state is None
 
 
 def test_an_empty_pot_is_no_plant_not_a_reward(chamber):

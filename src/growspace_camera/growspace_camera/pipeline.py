@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from growspace_camera.calibration import Calibrator, FitReport
-from growspace_camera.errors import CameraError
+from growspace_camera.errors import BAD_INPUT, CameraError
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import measured_state, Observer, score, Target
 from growspace_camera.segment import (
@@ -27,6 +27,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import Light
 from growspace_sim.core.state import ChamberState
 
+MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_node's width)
 
 @dataclass(frozen=True)
 class PipelineParams:
@@ -128,7 +129,8 @@ class Pipeline:
         """Measure one photo.
 
         Args:
-            photo: (H, W, 3) uint8 BGR photo (as OpenCV captures and decodes).
+            photo: (H, W, 3) uint8 BGR photo (as OpenCV captures and decodes); any other
+                array (grey, BGRA, float, empty) or None is refused ``BAD_INPUT``.
             cfg: The chamber's configuration (challenge, sizes, node spacing).
             light: The light the gantry reached (drawn blue in the observation).
             target: The task's target of this episode (drawn red, scored against).
@@ -150,6 +152,7 @@ class Pipeline:
     def _measure(self, photo: np.ndarray, cfg: SimConfig, light: Light, target: Target,
                  steps: int, out: Measurement, clock: _Clock) -> None:
         p, c = self.params, out.confidence
+        check_photo(photo)
         gray = to_gray(photo)
         small = self.detector.shrink(gray)
         seen: Exposure = exposure(small, p.segment)
@@ -179,6 +182,34 @@ class Pipeline:
         out.observation = self.observer.image(state, cfg)
         clock.lap('observation')
         out.ok = True
+
+
+def check_photo(photo: object) -> None:
+    """Raises CameraError ``BAD_INPUT`` naming what it got unless ``photo`` is an 8-bit BGR
+    photo: a (H, W, 3) uint8 array with both sides at least ``MIN_PHOTO_PX``.
+
+    OpenCV's own errors for such arrays (``cv2.error`` from a colour conversion, a grey array
+    read as a photo's plane) say nothing about where the array came from.
+    """
+    if not isinstance(photo, np.ndarray):
+        raise CameraError(BAD_INPUT, f'the photo must be an (H, W, 3) uint8 BGR array, got '
+                          f'{type(photo).__name__}')
+    got = f'a {photo.dtype} array of shape {photo.shape}'
+    if photo.dtype != np.uint8:
+        raise CameraError(BAD_INPUT, f'the photo must be 8-bit (uint8) BGR, got {got}'
+                          + (' (scale a float photo to 0-255 and convert with '
+                             'astype(np.uint8))' if photo.dtype.kind == 'f' else ''))
+    if photo.ndim == 2 or (photo.ndim == 3 and photo.shape[2] == 1):
+        raise CameraError(BAD_INPUT, f'the photo must be BGR (H, W, 3), got {got}: a grey '
+                          f'photo (cv2.cvtColor(photo, cv2.COLOR_GRAY2BGR) if it is one)')
+    if photo.ndim == 3 and photo.shape[2] == 4:
+        raise CameraError(BAD_INPUT, f'the photo must be BGR (H, W, 3), got {got}: BGRA '
+                          f'(drop the alpha: cv2.cvtColor(photo, cv2.COLOR_BGRA2BGR))')
+    if photo.ndim != 3 or photo.shape[2] != 3:
+        raise CameraError(BAD_INPUT, f'the photo must be BGR (H, W, 3), got {got}')
+    if min(photo.shape[:2]) < MIN_PHOTO_PX:
+        raise CameraError(BAD_INPUT, f'the photo must be at least {MIN_PHOTO_PX} x '
+                          f'{MIN_PHOTO_PX} px, got {got}')
 
 
 def overlay(photo: np.ndarray, measurement: Measurement, scale: float = 0.5) -> np.ndarray:
