@@ -110,6 +110,8 @@ def test_a_loose_piece_of_plant_is_counted_not_attached():
     mask = mask_of([(0.1, 0.0), (0.1, 0.1)]) | mask_of([(0.03, 0.15), (0.07, 0.17)])
     tree = tree_of(mask)
     assert tree.plants == 1 and tree.unattached_px > 10
+    loose = mask_of([(0.03, 0.15), (0.07, 0.17)])
+    assert tree.unexplained_px == np.count_nonzero(loose)  # its mask pixels, for the gate
     assert not near(tree.nodes, (0.05, 0.16), 0.02)
 
 

@@ -16,7 +16,8 @@ import pytest
 from skimage.filters import apply_hysteresis_threshold
 
 from growspace_camera.calibration import Calibrator, fit_plane
-from growspace_camera.errors import BAD_INPUT, CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
+from growspace_camera.errors import BAD_INPUT, CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT, \
+    UNEXPLAINED
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import Target
 from growspace_camera.oracle_view import candidate_points, oracle_chamber, plant_view
@@ -263,6 +264,26 @@ def test_a_twin_photo_gives_the_simulators_reward_tips_and_plant(chamber, photo)
     assert c.markers_seen == LAYOUT.ids and not c.fit_held and c.tips == len(seen)
     picture = overlay(photo.bgr, m)
     assert picture.shape == (540, 960, 3)
+
+
+def test_a_plant_whose_stem_the_mask_missed_is_refused_not_measured_as_a_stump(chamber, photo):
+    # The small tree: a brown woody stem the greenness mask does not see. Here the
+    # twin's stem is painted over with the backdrop from 9 to 16 cm (its first node is at
+    # 16.8 cm), so a 9 cm stub reaches the floor and the whole crown above reaches no base.
+    good = measure(Pipeline(), chamber, photo.bgr)
+    assert good.ok and good.confidence.unexplained == 0.0  # the normal twin: all explained
+    width = chamber.cfg.chamber_width
+    band = np.array([(0.0, 0.09), (width, 0.09), (width, 0.16), (0.0, 0.16)])
+    corners = np.rint(good.fit.fit.photo_points(band)).astype(np.int32)
+    inside = np.zeros(photo.bgr.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, corners, 1)
+    backdrop = np.median(photo.bgr[inside > 0], axis=0)
+    bare = photo.bgr.copy()
+    bare[inside > 0] = backdrop.astype(np.uint8)
+    m = measure(Pipeline(), chamber, bare)
+    assert not m.ok and m.error.code == UNEXPLAINED, m.error
+    assert 'reach no stem base' in m.error.message and 'max_unexplained = 0.25' in m.error.message
+    assert m.confidence.unexplained > 0.5 and m.reward == 0.0 and m.state is None
 
 
 def test_hidden_markers_after_a_good_photo_hold_the_fit_and_say_so(chamber, photo):

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from growspace_camera.calibration import Calibrator, FitReport
-from growspace_camera.errors import BAD_INPUT, CameraError
+from growspace_camera.errors import BAD_INPUT, CameraError, UNEXPLAINED
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import measured_state, Observer, score, Target
 from growspace_camera.segment import (
@@ -37,6 +37,11 @@ class PipelineParams:
     segment: SegmentParams = SegmentParams()
     tree: TreeParams = TreeParams()
     max_fit_error_m: float = 0.005  # largest RMS marker-corner error of a fit or hold [m]
+    # Largest fraction of the plant mask in pieces that hold no stem base. Such a piece is
+    # plant the measured trees leave out (a leafy crown over a brown stem the mask missed:
+    # its trees are stumps, and their reward a confident wrong number) or green that is not
+    # plant (a lamp's edge); on the photo twin's grown plants it is 0 (see docs/hardware.md).
+    max_unexplained: float = 0.25
 
 
 @dataclass
@@ -56,6 +61,7 @@ class Confidence:
         specks: Mask pixels dropped as specks.
         skeleton_px: Skeleton pixels per plant.
         unattached_px: Skeleton pixels no stem base reaches.
+        unexplained: Fraction of the plant mask in pieces that hold no stem base [0-1].
         tips: Tips measured.
         tips_pruned: Skeleton end points dropped as spurs.
     """
@@ -72,6 +78,7 @@ class Confidence:
     specks: int = 0
     skeleton_px: tuple[int, ...] = ()
     unattached_px: int = 0
+    unexplained: float = float('nan')
     tips: int = 0
     tips_pruned: int = 0
 
@@ -174,7 +181,9 @@ class Pipeline:
                                        cfg.branch_length_m, p.tree, seg.coverage)
         c.skeleton_px, c.unattached_px = tree.skeleton_px, tree.unattached_px
         c.tips, c.tips_pruned = int(tree.tips.size), tree.tips_pruned
+        c.unexplained = tree.unexplained_px / max(c.plant_pixels, 1)
         clock.lap('skeleton')
+        check_explained(tree, c.plant_pixels, p.max_unexplained)
         out.state = state = measured_state(tree, cfg, light, target, steps)
         reward, plant_rewards, success = score(state, cfg)
         out.reward, out.plant_rewards, out.success = float(reward), plant_rewards, bool(success)
@@ -182,6 +191,18 @@ class Pipeline:
         out.observation = self.observer.image(state, cfg)
         clock.lap('observation')
         out.ok = True
+
+
+def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) -> None:
+    """Raises CameraError ``UNEXPLAINED`` when more than ``max_unexplained`` of the plant mask
+    lies in pieces that hold no stem base (the measured trees do not explain the photo)."""
+    if tree.unexplained_px > max_unexplained * plant_pixels:
+        share = tree.unexplained_px / max(plant_pixels, 1)
+        raise CameraError(UNEXPLAINED, f'the plants measured from their stem bases explain '
+                          f'{1 - share:.0%} of the plant mask: {tree.unexplained_px} of '
+                          f'{plant_pixels} mask pixels reach no stem base (max_unexplained = '
+                          f'{max_unexplained:g}); a stem the mask missed (brown, woody, '
+                          f'hidden) or green that is not plant')
 
 
 def check_photo(photo: object) -> None:

@@ -70,6 +70,7 @@ class SkeletonGraph:
         root_x: (P,) each stem's x on the floor [m].
         pruned: Spurs pruned.
         unattached: Skeleton pixels no base reaches.
+        unexplained: Mask pixels in pieces of the mask that hold no kept stem base.
     """
 
     rows: np.ndarray
@@ -87,6 +88,7 @@ class SkeletonGraph:
     root_x: np.ndarray
     pruned: int
     unattached: int
+    unexplained: int
 
 
 def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
@@ -152,7 +154,19 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
         junction=junction, removed=removed, ends=ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
-        unattached=int(n - reached.sum()))
+        unattached=int(n - reached.sum()),
+        unexplained=_unexplained(mask[box], rows[roots] - top, cols[roots] - left))
+
+
+def _unexplained(mask: np.ndarray, root_rows: np.ndarray, root_cols: np.ndarray) -> int:
+    """Mask pixels in pieces (8-connected, as the skeleton is) that hold none of the roots:
+    plant the measured trees do not account for."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8),
+                                                               connectivity=8)
+    rooted = np.zeros(count, bool)
+    rooted[labels[root_rows, root_cols]] = True
+    rooted[0] = True  # the background
+    return int(stats[~rooted, cv2.CC_STAT_AREA].sum())
 
 
 def _centres(cover: np.ndarray, rows: np.ndarray, cols: np.ndarray,
