@@ -86,6 +86,9 @@ class CameraParams:
                               unit='deg', bounds=Bounds(1.0, 90.0))
     min_stem_m: float = param(0.05, 'a stem base carrying less plant than this is a speck',
                               unit='m', bounds=Bounds(0.0, 1.0))
+    max_base_tilt_deg: float = param(35.0, 'plant reaching the floor is a stem base only if it '
+                                     'rises within this angle of vertical (else a leaf)',
+                                     unit='deg', bounds=Bounds(0.0, 90.0))
     max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',
                                    unit='m', bounds=Bounds(0.0001, 0.1))
     max_unexplained: float = param(0.25, 'largest share of the plant mask in pieces that hold '
