@@ -9,6 +9,7 @@ from pathlib import Path
 import re
 from types import SimpleNamespace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -17,6 +18,7 @@ from growspace_camera.capture import Camera, DeviceSettings, DeviceSource, open_
     PhotoSource, Shot, VideoSource
 from growspace_camera.main import build
 from growspace_camera.measure import Target
+from growspace_camera.pipeline import Pipeline
 from growspace_camera.settings import CameraParams, layout_from_dict, load_layout
 from growspace_camera.twin import PhotoTwin
 from growspace_sim.core.config import SimConfig
@@ -90,6 +92,33 @@ def test_a_bad_request_is_an_error_answer_naming_the_field(tmp_path):
     reply = transport.services['camera/capture'](request)
     assert 'config must be a chamber/config JSON payload' in reply.measurement.error
     assert any('refused' in w for w in transport.warnings)
+
+
+def test_a_refusal_names_its_reason_in_the_answer_and_on_camera_status(tmp_path):
+    from test_camera_vision import stem_painted_out
+
+    cfg = SimConfig(challenge='control', setting='hard')
+    sim = Simulation(cfg)
+    sim.reset(seed=11)
+    oracle = cfg.task.oracle()
+    for _ in range(12):
+        sim.apply_discrete(oracle.act(sim.chamber))
+        sim.step()
+    shot = PhotoTwin(load_layout()).photo(sim.chamber, seed=4)
+    fit = Pipeline().measure(shot.bgr, cfg, sim.chamber.light.copy(),
+                             Target(sim.chamber.target), sim.chamber.steps).fit.fit
+    photos = tmp_path / 'shots'
+    photos.mkdir()
+    cv2.imwrite(str(photos / 'a.png'), stem_painted_out(shot.bgr, fit, cfg.chamber_width))
+    transport, _ = node_on(tmp_path, source=str(photos))
+    reply = capture(transport, sim, step=sim.chamber.steps, step_id=7)
+    m = reply.measurement
+    assert not m.ok and m.error_code == 'unexplained' and 'reach no stem base' in m.error
+    assert m.reward == 0.0 and len(reply.plant.node_x) == 0
+    status = transport.messages('camera/status')[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == 1 and 'unexplained: ' in status.message
+    assert values['last_error'].startswith('unexplained: ') and float(values['unexplained']) > 0.5
 
 
 def test_segmentation_is_drawn_only_while_someone_subscribes(tmp_path):

@@ -266,21 +266,25 @@ def test_a_twin_photo_gives_the_simulators_reward_tips_and_plant(chamber, photo)
     assert picture.shape == (540, 960, 3)
 
 
+def stem_painted_out(bgr: np.ndarray, fit, width_m: float) -> np.ndarray:  # noqa: ANN001
+    """The photo with the chamber from 11 to 16 cm above the floor painted over with its own
+    median colour (backdrop): a stem the greenness mask does not see, as a brown woody one."""
+    band = np.array([(0.0, 0.11), (width_m, 0.11), (width_m, 0.16), (0.0, 0.16)])
+    inside = np.zeros(bgr.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, np.rint(fit.photo_points(band)).astype(np.int32), 1)
+    bare = bgr.copy()
+    bare[inside > 0] = np.median(bgr[inside > 0], axis=0).astype(np.uint8)
+    return bare
+
+
 def test_a_plant_whose_stem_the_mask_missed_is_refused_not_measured_as_a_stump(chamber, photo):
-    # The issue's small tree: a brown woody stem the greenness mask does not see. Here the
-    # twin's stem is painted over with the backdrop from 11 to 16 cm (its first node is at
-    # 16.8 cm), so a stub of stem reaches the floor and the whole crown above reaches no base.
+    # The issue's small tree: a brown woody stem the greenness mask does not see, so a stub of
+    # stem reaches the floor and the whole crown above (the first node is at 16.8 cm) reaches
+    # no base: it was measured ok, as a stump with its tips at the base.
     good = measure(Pipeline(), chamber, photo.bgr)
     assert good.ok and good.confidence.unexplained == 0.0  # the normal twin: all explained
-    width = chamber.cfg.chamber_width
-    band = np.array([(0.0, 0.11), (width, 0.11), (width, 0.16), (0.0, 0.16)])
-    corners = np.rint(good.fit.fit.photo_points(band)).astype(np.int32)
-    inside = np.zeros(photo.bgr.shape[:2], np.uint8)
-    cv2.fillConvexPoly(inside, corners, 1)
-    backdrop = np.median(photo.bgr[inside > 0], axis=0)
-    bare = photo.bgr.copy()
-    bare[inside > 0] = backdrop.astype(np.uint8)
-    m = measure(Pipeline(), chamber, bare)
+    m = measure(Pipeline(), chamber,
+                stem_painted_out(photo.bgr, good.fit.fit, chamber.cfg.chamber_width))
     assert not m.ok and m.error.code == UNEXPLAINED, m.error
     assert 'reach no stem base' in m.error.message and 'max_unexplained = 0.25' in m.error.message
     assert m.confidence.unexplained > 0.5 and m.reward == 0.0 and m.state is None
