@@ -11,10 +11,12 @@ import cv2
 import numpy as np
 import pytest
 
-from growspace_camera.errors import CameraError, NO_PLANT
+from growspace_camera.errors import CameraError, NO_PLANT, PLANTS
+from growspace_camera.measure import measured_state, Target
 from growspace_camera.nodes import measure_tree
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
+from growspace_sim.core.config import SimConfig
 
 GRID = Grid(0.2, 0.2, 0.002)
 SPACING = 0.05
@@ -96,6 +98,14 @@ def test_two_stems_are_two_plants_left_to_right():
     assert sorted(tree.plant[tree.tips]) == [0, 1]
     assert near(tips, (0.06, 0.1))
     assert near(tips, (0.15, 0.12))
+
+
+def test_a_plant_count_the_challenge_cannot_have_is_refused_naming_both_counts():
+    tree = tree_of(mask_of([(0.15, 0.0), (0.15, 0.12)], [(0.04, 0.0), (0.04, 0.1)]))
+    with pytest.raises(CameraError, match=r'2 stem base\(s\) in the photo, the control '
+                       r'challenge has 1 plant\(s\)') as e:
+        measured_state(tree, SimConfig(challenge='control'), None, Target(0.4 + 0.5j), 3)
+    assert e.value.code == PLANTS
 
 
 def test_crossing_branches_still_make_a_tree_of_one_plant():
