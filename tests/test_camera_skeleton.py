@@ -181,16 +181,15 @@ def test_a_leaf_meeting_the_floor_at_a_slant_is_not_a_stem_base():
     assert tree.plants == 1 and tree.nodes[0] == pytest.approx((0.1, 0.0), abs=0.003)
 
 
-def test_a_branch_lying_across_the_soil_line_with_a_shoot_of_its_own_is_not_a_stem():
-    # Its contact is nearer its shoot (7 cm along the skeleton to the fork) than the stem's
-    # base is (10 cm), so only the slant (53 degrees off vertical, the 6 cm from the floor to
-    # the fork) tells it from a second plant.
-    mask = mask_of(STEM) | mask_of([(0.1, 0.06), (0.02, 0.0), (0.005, -0.012)],
-                                   [(0.068, 0.036), (0.05, 0.1)], width_m=0.01)
-    tree = tree_of(mask)
-    assert tree.plants == 1 and tree.nodes[0] == pytest.approx((0.1, 0.0), abs=0.003)
-    assert near(tree.nodes[tree.tips], (0.05, 0.1), 0.008)  # the shoot is the plant's
-    assert tree_of(mask, max_base_tilt_deg=90.0).plants == 2  # the slant did it
+def test_a_twig_lying_across_the_soil_line_is_not_a_stem():
+    # A loose twig (a tip of its own: only its slant, 51 degrees off vertical, tells it from a
+    # second plant) is plant no stem base explains.
+    stem = mask_of([(0.18, 0.0), (0.18, 0.17)])
+    twig = mask_of([(0.0, -0.01), (0.15, 0.11)], width_m=0.008)
+    tree = tree_of(stem | twig)
+    assert tree.plants == 1 and tree.nodes[0] == pytest.approx((0.18, 0.0), abs=0.003)
+    assert tree.unexplained_px == np.count_nonzero(twig & ~stem)
+    assert tree_of(stem | twig, max_base_tilt_deg=90.0).plants == 2  # the slant did it
 
 
 def test_two_stems_with_a_leaf_each_on_the_floor_are_two_plants():

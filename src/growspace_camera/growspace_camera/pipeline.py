@@ -39,9 +39,12 @@ class PipelineParams:
     max_fit_error_m: float = 0.005  # largest RMS marker-corner error of a fit or hold [m]
     # Largest fraction of the plant mask in pieces that hold no stem base. Such a piece is
     # plant the measured trees leave out (a leafy crown over a brown stem the mask missed:
-    # its trees are stumps, and their reward a confident wrong number) or green that is not
-    # plant (a lamp's edge); on the photo twin's grown plants it is 0 (see docs/hardware.md).
-    max_unexplained: float = 0.25
+    # its trees are stumps, and their reward a confident wrong number; 99 % of the issue's
+    # small tree) or green that is not plant (a lamp's edge or cast). Half, not less: a blob
+    # of lamp-cast green beside a plant measured whole leaves its reward right, and at 0.25
+    # the twin's closed loop refused 26 such photos of 3,060 (control hard, 11 to 89 % of
+    # the mask); on the twin's fidelity photos of grown plants it is 0 (docs/hardware.md).
+    max_unexplained: float = 0.5
 
 
 @dataclass

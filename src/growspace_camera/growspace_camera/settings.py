@@ -91,7 +91,7 @@ class CameraParams:
                                      unit='deg', bounds=Bounds(0.0, 90.0))
     max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',
                                    unit='m', bounds=Bounds(0.0001, 0.1))
-    max_unexplained: float = param(0.25, 'largest share of the plant mask in pieces that hold '
+    max_unexplained: float = param(0.5, 'largest share of the plant mask in pieces that hold '
                                    'no stem base; more: the photo is refused (unexplained)',
                                    unit='fraction', bounds=Bounds(0.0, 1.0))
     segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',

@@ -45,10 +45,10 @@ class TreeParams:
         corner_deg: A path turning by at least this much has a node there [deg].
         min_stem_m: A base carrying less skeleton than this is a speck, not a plant [m].
         max_base_tilt_deg: A piece of plant reaching the floor is a stem base only if its
-            first ``min_stem_m`` rises within this angle of vertical [deg]: the simulator's
-            first stem is vertical, and a leaf drooping across the soil line or a branch lying
-            on it meets it at a slant. (A leaf hanging steeply is told apart by having no tip
-            of its own: see ``skeleton_graph``.)
+            ``min_stem_m`` above the base band rise within this angle of vertical [deg]: the
+            simulator's first stem is vertical, and a leaf drooping across the soil line or a
+            branch lying on it meets it at a slant. (A leaf hanging steeply is told apart by
+            having no tip of its own: see ``skeleton_graph``.)
     """
 
     base_band_m: float = 0.03
@@ -136,8 +136,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
                           f'within base_band_m = {params.base_band_m} m of z = 0')
     src, dst, weight = _edges(rows, cols, mask.shape)
     stem, tilt = _stem_bases(coo_matrix((weight, (src, dst)), shape=(n, n)).tocsr(), roots,
-                             group, rows, cols, radius, params.min_stem_m / grid.pixel_m,
-                             params)
+                             group, rows, cols, radius, height, band_px,
+                             params.min_stem_m / grid.pixel_m, params)
     if not stem.any():
         tilts = ', '.join('too short' if np.isnan(t) else f'{t:.0f} deg' for t in tilt)
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {roots.size} piece(s) of '
@@ -255,28 +255,39 @@ def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
 
 
 def _stem_bases(graph, roots: np.ndarray, group: np.ndarray,  # noqa: ANN001 - sparse matrix
-                rows: np.ndarray, cols: np.ndarray, radius: np.ndarray, rise_px: float,
+                rows: np.ndarray, cols: np.ndarray, radius: np.ndarray, height: int,
+                band_px: float, rise_px: float,
                 params: TreeParams) -> tuple[np.ndarray, np.ndarray]:
     """Which floor contacts rise as a stem does: near vertical (the simulator's first stem is
     vertical; a leaf drooping across the soil line, or a branch lying on it, meets it at a
     slant).
 
-    Per contact, the skeleton between ``rise`` / 2 and ``rise`` from it along the skeleton,
-    ``rise`` being the least a stem carries (``min_stem_m``) or four of its radii if more:
-    the thinning's fork into the corners of a thick stem's cut end (about a radius high)
-    stays below that stretch. The stretch's principal axis gives the direction. Returns
-    (rises as a stem, tilt from vertical [deg]; NaN when too short to tell) per contact."""
+    Per contact, the shortest skeleton path from it up to ``rise_px`` (the least a stem
+    carries, ``min_stem_m``) above the base band and its widest radius, taken where it is
+    above those: whatever lies in the band (a thick stem's cut end, forked by thinning into
+    its corners; a speck or a pot's rim touching it) stays out, and so do leaves joining the
+    stem above (they are not on the shortest path up). The principal axis of that stretch
+    gives the direction. Returns (rises as a stem, tilt from vertical [deg]; NaN when nothing
+    reaches that high) per contact."""
     widest = np.zeros(roots.size)
     np.maximum.at(widest, group[group >= 0], radius[group >= 0])
-    reach = np.maximum(rise_px, 4.0 * widest)
-    near = dijkstra(graph, directed=False, indices=roots, limit=float(reach.max()))
-    near = near.reshape(roots.size, -1)
-    tilt = np.full(roots.size, np.nan)  # NaN: too short to tell
+    low = band_px + widest  # the stretch's bottom, per contact, above the floor [px]
+    near, pred = dijkstra(graph, directed=False, indices=roots, return_predecessors=True,
+                          limit=float(3.0 * (low.max() + rise_px)))
+    near, pred = near.reshape(roots.size, -1), pred.reshape(roots.size, -1)
+    above = height - 0.5 - rows  # each pixel's height above the floor [px]
+    tilt = np.full(roots.size, np.nan)  # NaN: nothing reaches that high
     for k in range(roots.size):
-        far = (near[k] >= 0.5 * reach[k]) & (near[k] <= reach[k])
-        if np.count_nonzero(far) < 3:
+        top = np.flatnonzero(np.isfinite(near[k]) & (above >= low[k] + rise_px))
+        if top.size == 0:
             continue  # too short to be a stem (``_real_stems`` drops it as a speck)
-        points = np.column_stack((rows[far], cols[far])).astype(float)
+        p, path = int(top[np.argmin(near[k][top])]), []
+        while p >= 0:
+            path.append(p)
+            p = int(pred[k, p])
+        path = np.array(path)
+        path = path[above[path] >= low[k]]
+        points = np.column_stack((rows[path], cols[path])).astype(float)
         _, _, axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)
         tilt[k] = np.degrees(np.arctan2(abs(axes[0][1]), abs(axes[0][0])))
     return np.nan_to_num(tilt, nan=90.0) <= params.max_base_tilt_deg, tilt
