@@ -9,6 +9,7 @@ from pathlib import Path
 import re
 from types import SimpleNamespace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -17,6 +18,7 @@ from growspace_camera.capture import Camera, DeviceSettings, DeviceSource, open_
     PhotoSource, Shot, VideoSource
 from growspace_camera.main import build
 from growspace_camera.measure import Target
+from growspace_camera.pipeline import Pipeline
 from growspace_camera.settings import CameraParams, layout_from_dict, load_layout
 from growspace_camera.twin import PhotoTwin
 from growspace_sim.core.config import SimConfig
@@ -93,6 +95,33 @@ def test_a_bad_request_is_an_error_answer_naming_the_field(tmp_path):
     assert any('refused' in w for w in transport.warnings)
 
 
+def test_a_refusal_names_its_reason_in_the_answer_and_on_camera_status(tmp_path):
+    from test_camera_vision import stem_painted_out
+
+    cfg = SimConfig(challenge='control', setting='hard')
+    sim = Simulation(cfg)
+    sim.reset(seed=11)
+    oracle = cfg.task.oracle()
+    for _ in range(12):
+        sim.apply_discrete(oracle.act(sim.chamber))
+        sim.step()
+    shot = PhotoTwin(load_layout()).photo(sim.chamber, seed=4)
+    fit = Pipeline().measure(shot.bgr, cfg, sim.chamber.light.copy(),
+                             Target(sim.chamber.target), sim.chamber.steps).fit.fit
+    photos = tmp_path / 'shots'
+    photos.mkdir()
+    cv2.imwrite(str(photos / 'a.png'), stem_painted_out(shot.bgr, fit, cfg.chamber_width))
+    transport, _ = node_on(tmp_path, source=str(photos))
+    reply = capture(transport, sim, step=sim.chamber.steps, step_id=7)
+    m = reply.measurement
+    assert not m.ok and m.error_code == 'unexplained' and 'reach no stem base' in m.error
+    assert m.reward == 0.0 and len(reply.plant.node_x) == 0
+    status = transport.messages('camera/status')[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == 1 and 'unexplained: ' in status.message
+    assert values['last_error'].startswith('unexplained: ') and float(values['unexplained']) > 0.5
+
+
 def test_segmentation_is_drawn_only_while_someone_subscribes(tmp_path):
     transport, _ = node_on(tmp_path, source='twin')
     sim = Simulation(SimConfig())
@@ -147,7 +176,7 @@ def test_camera_backs_off_and_comes_back(tmp_path):
         clock.t = float(t)
         assert camera.read(shot) is None
     assert source.tries[:5] == [0.0, 0.5, 1.5, 3.5, 8.5]  # 0.5, 1, 2, 5 s apart
-    assert len(warnings) == 1 and 'no photos' in warnings[0]
+    assert len(warnings) == 1 and f'folder {folder} does not exist' in warnings[0]
     folder.mkdir()
     sim = Simulation(SimConfig())
     sim.reset(seed=4)
@@ -176,6 +205,85 @@ def test_file_sources_loop_or_end(tmp_path):
     assert isinstance(open_source(str(tmp_path / 'run.mp4'), DeviceSettings(), True),
                       VideoSource)
     assert isinstance(open_source('3', DeviceSettings(), True), DeviceSource)
+
+
+def test_an_unreadable_file_is_skipped_once_and_the_run_ends_at_the_last_photo(tmp_path):
+    sim = Simulation(SimConfig())
+    sim.reset(seed=5)
+    twin = PhotoTwin(load_layout(), size=(320, 180))
+    (tmp_path / 'a.jpg').write_bytes(twin.photo(sim.chamber, 0).jpeg)
+    (tmp_path / 'b.jpg').write_bytes(b'')  # empty: OpenCV's own message is '!buf.empty()'
+    (tmp_path / 'c.png').write_bytes(b'not a png at all')
+    (tmp_path / 'd.jpg').write_bytes(twin.photo(sim.chamber, 1).jpeg)
+    shot = Shot(SimConfig(), None, 0)
+    warnings = []
+    once = Camera(open_source(str(tmp_path), DeviceSettings(), loop=False,
+                              warn=warnings.append), warnings.append, lambda s: None)
+    got = [once.read(shot) for _ in range(4)]
+    assert [f is not None for f in got] == [True, True, False, False]
+    assert once.ended and 'no more photos' in once.failure
+    assert len(warnings) == 2 and all('buf' not in w for w in warnings), warnings
+    assert 'b.jpg is not a photo OpenCV can read: the file is empty' in warnings[0]
+    assert 'c.png is not a photo OpenCV can read (16 bytes' in warnings[1]
+    warnings.clear()
+    looping = Camera(open_source(str(tmp_path), DeviceSettings(), loop=True,
+                                 warn=warnings.append), warnings.append, lambda s: None)
+    frames = [looping.read(shot) for _ in range(6)]
+    assert all(f is not None for f in frames) and len(warnings) == 2  # said once per file
+    assert [f.jpeg for f in frames[:2]] == [f.jpeg for f in frames[2:4]]
+
+
+def test_a_reopened_folder_goes_on_after_its_last_photo(tmp_path):
+    sim = Simulation(SimConfig())
+    sim.reset(seed=5)
+    twin = PhotoTwin(load_layout(), size=(320, 180))
+    photos = [twin.photo(sim.chamber, k).jpeg for k in range(3)]
+    for k, jpeg in enumerate(photos):
+        (tmp_path / f'{k}.jpg').write_bytes(jpeg)
+    source = PhotoSource(str(tmp_path), loop=False)
+    source.open()
+    assert source.read(Shot(SimConfig(), None, 0)).jpeg == photos[0]
+    source.close()  # as a Camera does when the source is lost
+    source.open()
+    assert source.read(Shot(SimConfig(), None, 0)).jpeg == photos[1]
+
+
+def test_a_folder_of_nothing_readable_ends_with_that_reason(tmp_path):
+    (tmp_path / 'a.jpg').write_bytes(b'')
+    warnings = []
+    camera = Camera(open_source(str(tmp_path), DeviceSettings(), loop=True,
+                                warn=warnings.append), warnings.append, lambda s: None)
+    assert camera.read(Shot(SimConfig(), None, 0)) is None
+    assert camera.ended and 'none of its files is a photo OpenCV can read' in camera.failure
+
+
+def test_missing_path_missing_folder_and_unreadable_file_are_three_messages(tmp_path, capsys):
+    (tmp_path / 'bad.jpg').write_bytes(b'\x00' * 40)
+    shot = Shot(SimConfig(), None, 0)
+
+    def failure(spec: str) -> str:
+        camera = Camera(open_source(spec, DeviceSettings(), loop=False), lambda s: None,
+                        lambda s: None)
+        assert camera.read(shot) is None
+        return camera.failure
+
+    missing = failure(str(tmp_path / 'gone.jpg'))
+    folder = failure(str(tmp_path / 'gone') + '/')
+    folder_glob = failure(str(tmp_path / 'gone' / '*.jpg'))
+    unreadable = failure(str(tmp_path / 'bad.jpg'))
+    assert missing == f'photo {tmp_path}/gone.jpg does not exist'
+    assert folder == f'folder {tmp_path}/gone/ does not exist'
+    assert folder_glob.startswith(f'folder {tmp_path}/gone (of ')
+    assert unreadable.endswith('none of its files is a photo OpenCV can read')
+    # The console tool says the same three things.
+    from growspace_camera.cli import main
+    code = main(['measure', str(tmp_path / 'gone.jpg'), str(tmp_path), str(tmp_path / 'bad.jpg')])
+    lines = capsys.readouterr().out.splitlines()
+    assert code == 1 and lines == [
+        f'NOT MEASURED: {tmp_path}/gone.jpg does not exist',
+        f'NOT MEASURED: {tmp_path} is a folder, not a photo',
+        f'NOT MEASURED: {tmp_path}/bad.jpg is not a photo OpenCV can read (40 bytes, '
+        "starting b'\\x00\\x00\\x00\\x00\\x00\\x00\\x00\\x00')"]
 
 
 def test_realtime_publishes_a_measured_photo_per_tick(tmp_path):

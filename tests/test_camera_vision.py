@@ -7,6 +7,7 @@ tests check the pipeline against an independent picture of the truth.
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import cv2
@@ -15,7 +16,8 @@ import pytest
 from skimage.filters import apply_hysteresis_threshold
 
 from growspace_camera.calibration import Calibrator, fit_plane
-from growspace_camera.errors import CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT
+from growspace_camera.errors import BAD_INPUT, CameraError, EXPOSURE, FIT, MARKERS, NO_PLANT, \
+    UNEXPLAINED
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import Target
 from growspace_camera.oracle_view import candidate_points, oracle_chamber, plant_view
@@ -165,6 +167,26 @@ def test_black_or_white_photo_gives_an_error_and_no_reward(chamber, level):
     assert m.reward == 0.0 and m.observation is None and m.state is None
 
 
+@pytest.mark.parametrize('photo_in, named', [
+    (None, 'got NoneType'),
+    (np.full((720, 1280), 128, np.uint8), r'shape \(720, 1280\): a grey photo'),
+    (np.full((720, 1280, 1), 128, np.uint8), r'shape \(720, 1280, 1\): a grey photo'),
+    (np.full((720, 1280, 4), 128, np.uint8), r'shape \(720, 1280, 4\): BGRA'),
+    (np.zeros((0, 0, 3), np.uint8), r'at least 16 x 16 px, got a uint8 array of shape \(0, 0'),
+    (np.zeros((0, 0), np.uint8), r'shape \(0, 0\)'),
+    (np.full((720, 1280, 3), 0.5), 'must be 8-bit .* got a float64 array'),
+    (np.full((720, 1280, 3), 128, np.uint16), 'must be 8-bit .* got a uint16 array'),
+    (np.full((720, 1280, 2), 128, np.uint8), r'shape \(720, 1280, 2\)'),
+    ([[1, 2, 3]], 'got list'),
+], ids=['none', 'grey', 'grey-1ch', 'bgra', 'empty', 'empty-2d', 'float', 'uint16',
+        '2ch', 'list'])
+def test_anything_but_an_8bit_bgr_photo_is_refused_naming_what_it_got(chamber, photo_in, named):
+    m = measure(Pipeline(), chamber, photo_in)
+    assert not m.ok and isinstance(m.error, CameraError) and m.error.code == BAD_INPUT
+    assert re.search(named, m.error.message), m.error.message
+    assert m.reward == 0.0 and m.state is None
+
+
 def test_an_empty_pot_is_no_plant_not_a_reward(chamber):
     empty = PhotoTwin(LAYOUT).photo(chamber.sim.chamber, seed=4, plant=False)
     m = measure(Pipeline(), chamber, empty.bgr)
@@ -242,6 +264,30 @@ def test_a_twin_photo_gives_the_simulators_reward_tips_and_plant(chamber, photo)
     assert c.markers_seen == LAYOUT.ids and not c.fit_held and c.tips == len(seen)
     picture = overlay(photo.bgr, m)
     assert picture.shape == (540, 960, 3)
+
+
+def stem_painted_out(bgr: np.ndarray, fit, width_m: float) -> np.ndarray:  # noqa: ANN001
+    """The photo with the chamber from 13 to 16 cm above the floor painted over with its own
+    median colour (backdrop): a stem the greenness mask does not see, as a brown woody one."""
+    band = np.array([(0.0, 0.13), (width_m, 0.13), (width_m, 0.16), (0.0, 0.16)])
+    inside = np.zeros(bgr.shape[:2], np.uint8)
+    cv2.fillConvexPoly(inside, np.rint(fit.photo_points(band)).astype(np.int32), 1)
+    bare = bgr.copy()
+    bare[inside > 0] = np.median(bgr[inside > 0], axis=0).astype(np.uint8)
+    return bare
+
+
+def test_a_plant_whose_stem_the_mask_missed_is_refused_not_measured_as_a_stump(chamber, photo):
+    # The issue's small tree: a brown woody stem the greenness mask does not see, so a stub of
+    # stem reaches the floor and the whole crown above (the first node is at 16.8 cm) reaches
+    # no base: it was measured ok, as a stump with its tips at the base.
+    good = measure(Pipeline(), chamber, photo.bgr)
+    assert good.ok and good.confidence.unexplained == 0.0  # the normal twin: all explained
+    m = measure(Pipeline(), chamber,
+                stem_painted_out(photo.bgr, good.fit.fit, chamber.cfg.chamber_width))
+    assert not m.ok and m.error.code == UNEXPLAINED, m.error
+    assert 'reach no stem base' in m.error.message and 'max_unexplained = 0.5' in m.error.message
+    assert m.confidence.unexplained > 0.5 and m.reward == 0.0 and m.state is None
 
 
 def test_hidden_markers_after_a_good_photo_hold_the_fit_and_say_so(chamber, photo):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+import bisect
 import glob
 import os
 from pathlib import Path
@@ -202,47 +203,114 @@ class VideoSource:
 
 
 class PhotoSource:
-    """A folder of photos, or a glob, in name order (JPEG bytes kept as they are)."""
+    """A folder of photos, or a glob, in name order (JPEG bytes kept as they are).
 
-    def __init__(self, pattern: str, loop: bool) -> None:
+    A file that cannot be read as a photo is skipped with one line to ``warn`` and left out of
+    later rounds: one bad file neither ends nor restarts the run. Reopened (after a lost
+    source), it goes on after the last photo it gave.
+
+    Args:
+        pattern: A folder, a glob such as ``shots/*.jpg``, or one photo's path.
+        loop: Start again at the first photo after the last.
+        warn: Writes a warning line (a skipped file); None: silent.
+    """
+
+    def __init__(self, pattern: str, loop: bool,
+                 warn: Callable[[str], Any] | None = None) -> None:
         self.name, self.loop = pattern, loop
+        self.warn = warn or (lambda line: None)
         self._files: list[str] = []
         self._next = 0
+        self._last = ''  # the last photo given, so a reopen goes on after it
+        self._bad: set[str] = set()  # files found unreadable (skipped, said once)
 
     def open(self) -> dict[str, str]:
+        files = [f for f in self._list() if f not in self._bad]
+        if not files:
+            raise CaptureError(f'{self.name}: none of its files is a photo OpenCV can read')
+        self._files = files
+        self._next = bisect.bisect_right(files, self._last) if self._last else 0
+        return {'photos': str(len(files)), 'first': files[0]}
+
+    def _list(self) -> list[str]:
+        """The photos the pattern names, in name order (raises for a missing path or none)."""
         if os.path.isdir(self.name):
             files = [str(p) for p in sorted(Path(self.name).iterdir())
                      if p.suffix.lower() in PHOTO_SUFFIXES]
-        else:
-            files = sorted(glob.glob(self.name))
+            if not files:
+                raise CaptureError(f'folder {self.name} holds no photos '
+                                   f'({", ".join(PHOTO_SUFFIXES)})')
+            return files
+        if not any(c in self.name for c in '*?['):
+            if not os.path.isfile(self.name):  # (an existing folder was listed above)
+                what = 'photo' if Path(self.name).suffix.lower() in PHOTO_SUFFIXES \
+                    and not self.name.endswith(('/', os.sep)) else 'folder'
+                raise CaptureError(f'{what} {self.name} does not exist')
+            return [self.name]
+        folder = os.path.dirname(self.name)
+        if folder and not any(c in folder for c in '*?[') and not os.path.isdir(folder):
+            raise CaptureError(f'folder {folder} (of {self.name}) does not exist')
+        files = sorted(f for f in glob.glob(self.name) if os.path.isfile(f))
         if not files:
-            raise CaptureError(f'{self.name}: no photos ({", ".join(PHOTO_SUFFIXES)})')
-        self._files, self._next = files, 0
-        return {'photos': str(len(files)), 'first': files[0]}
+            raise CaptureError(f'{self.name}: no file matches')
+        return files
 
     def read(self, shot: Shot) -> Frame:
-        if self._next >= len(self._files):
-            if not self.loop or not self._files:
-                raise SourceEnded(f'{self.name}: no more photos')
-            self._next = 0
-        path = self._files[self._next]
-        self._next += 1
-        try:
-            data = Path(path).read_bytes()
-        except OSError as e:
-            raise CaptureError(f'{path}: {e.strerror or e}') from None
-        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise CaptureError(f'{path} is not a photo OpenCV can read')
-        jpeg = data if data[:3] == b'\xff\xd8\xff' else None
-        return Frame(bgr, jpeg, time.time_ns())
+        while self._files:
+            if self._next >= len(self._files):
+                if not self.loop:
+                    break
+                self._next = 0
+            path = self._files[self._next]
+            try:
+                bgr, data = read_photo(path)
+            except CaptureError as e:
+                self.warn(f'camera: skipped {e}')
+                self._bad.add(path)
+                del self._files[self._next]
+                continue
+            self._next += 1
+            self._last = path
+            jpeg = data if data[:3] == b'\xff\xd8\xff' else None
+            return Frame(bgr, jpeg, time.time_ns())
+        if not self._files:
+            raise SourceEnded(f'{self.name}: none of its files is a photo OpenCV can read')
+        raise SourceEnded(f'{self.name}: no more photos')
 
     def close(self) -> None:
         self._files = []
 
 
+def read_photo(path: str) -> tuple[np.ndarray, bytes]:
+    """A photo file's (H, W, 3) uint8 BGR pixels and its bytes.
+
+    Raises:
+        CaptureError: naming the path and what is wrong: it does not exist, it is a folder, it
+            cannot be read (permissions), it is empty, or OpenCV cannot decode it.
+    """
+    if os.path.isdir(path):
+        raise CaptureError(f'{path} is a folder, not a photo')
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise CaptureError(f'{path} does not exist') from None
+    except OSError as e:
+        raise CaptureError(f'{path} cannot be read: {e.strerror or e}') from None
+    if not data:
+        raise CaptureError(f'{path} is not a photo OpenCV can read: the file is empty')
+    try:  # (OpenCV raises for some broken headers and returns None for others)
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        bgr = None
+    if bgr is None:
+        raise CaptureError(f'{path} is not a photo OpenCV can read ({len(data)} bytes, '
+                           f'starting {data[:8]!r})')
+    return bgr, data
+
+
 def open_source(spec: str, device: DeviceSettings, loop: bool,
-                twin: Callable[[], Source] | None = None) -> Source:
+                twin: Callable[[], Source] | None = None,
+                warn: Callable[[str], Any] | None = None) -> Source:
     """The source a ``source`` parameter names (not opened yet).
 
     Args:
@@ -251,6 +319,7 @@ def open_source(spec: str, device: DeviceSettings, loop: bool,
         device: What to ask of a webcam.
         loop: Files start again at their end.
         twin: Builds the twin source (the node passes one that knows the marker layout).
+        warn: Writes a warning line (a photo file skipped as unreadable).
     """
     spec = spec.strip()
     if spec == 'twin':
@@ -261,10 +330,10 @@ def open_source(spec: str, device: DeviceSettings, loop: bool,
         return DeviceSource(int(spec), device)
     if spec.startswith('/dev/'):
         return DeviceSource(spec, device)
-    if os.path.isdir(spec) or any(c in spec for c in '*?['):
-        return PhotoSource(spec, loop)
+    if os.path.isdir(spec) or spec.endswith(('/', os.sep)) or any(c in spec for c in '*?['):
+        return PhotoSource(spec, loop, warn)
     if Path(spec).suffix.lower() in PHOTO_SUFFIXES and '%' not in spec:
-        return PhotoSource(spec, loop)
+        return PhotoSource(spec, loop, warn)
     return VideoSource(spec, loop)
 
 

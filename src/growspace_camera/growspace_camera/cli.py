@@ -31,6 +31,7 @@ import sys
 import cv2
 import yaml
 
+from growspace_camera.capture import CaptureError, read_photo
 from growspace_camera.measure import Target
 from growspace_camera.photo_export import export_photos, FORMATS, SCALE_RANGE
 from growspace_camera.pipeline import overlay, Pipeline
@@ -156,9 +157,10 @@ def _measure(layout, cfg: SimConfig, args: argparse.Namespace) -> int:  # noqa: 
     pipeline = Pipeline(CameraParams().pipeline(layout))
     failed = 0
     for path in args.photos:
-        photo = cv2.imread(path, cv2.IMREAD_COLOR)
-        if photo is None:
-            print(f'{path}: not a photo OpenCV can read')
+        try:
+            photo, _ = read_photo(path)
+        except CaptureError as e:
+            print(f'NOT MEASURED: {e}')
             failed += 1
             continue
         m = pipeline.measure(photo, cfg, light, Target(point=target))

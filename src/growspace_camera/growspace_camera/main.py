@@ -39,9 +39,10 @@ def build(transport: Any, values: dict[str, Any]) -> CameraNode:
     layout = load_layout(settings.markers)
     device = DeviceSettings(settings.width, settings.height, settings.fps, settings.exposure,
                             settings.white_balance_k, settings.flush_frames)
-    source = open_source(settings.source, device, settings.loop,
-                         twin=lambda: TwinSource(layout, settings.twin_seed))
     logger = transport.logger
+    source = open_source(settings.source, device, settings.loop,
+                         twin=lambda: TwinSource(layout, settings.twin_seed),
+                         warn=lambda line: logger.warn(f'source:{line}', line))
     if settings.source != 'twin' and source.name.startswith('/dev/') and \
             (settings.exposure < 0 or settings.white_balance_k == 0):
         logger.warn('params:auto', f'camera_node: exposure and/or white balance left '

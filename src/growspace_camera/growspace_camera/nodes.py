@@ -39,6 +39,7 @@ class PlantTree:
         tips_pruned: End points dropped as spurs.
         skeleton_px: Skeleton pixels per plant (its length in pixels, roughly).
         unattached_px: Skeleton pixels that no stem base reaches (loose bits of plant).
+        unexplained_px: Mask pixels in pieces of the mask that hold no stem base.
     """
 
     nodes: np.ndarray
@@ -49,6 +50,7 @@ class PlantTree:
     tips_pruned: int
     skeleton_px: tuple[int, ...]
     unattached_px: int
+    unexplained_px: int = 0
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
@@ -84,7 +86,7 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
     return PlantTree(np.array(builder.nodes, np.float64).reshape(-1, 2),
                      np.array(builder.parent, np.int32), plant,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
-                     tuple(int(v) for v in lengths), g.unattached)
+                     tuple(int(v) for v in lengths), g.unattached, g.unexplained)
 
 
 def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.ndarray:

@@ -86,8 +86,14 @@ class CameraParams:
                               unit='deg', bounds=Bounds(1.0, 90.0))
     min_stem_m: float = param(0.05, 'a stem base carrying less plant than this is a speck',
                               unit='m', bounds=Bounds(0.0, 1.0))
+    max_base_tilt_deg: float = param(35.0, 'plant reaching the floor is a stem base only if it '
+                                     'rises within this angle of vertical (else a leaf)',
+                                     unit='deg', bounds=Bounds(0.0, 90.0))
     max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',
                                    unit='m', bounds=Bounds(0.0001, 0.1))
+    max_unexplained: float = param(0.5, 'largest share of the plant mask in pieces that hold '
+                                   'no stem base; more: the photo is refused (unexplained)',
+                                   unit='fraction', bounds=Bounds(0.0, 1.0))
     segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',
                                       unit='1', bounds=Bounds(0.05, 1.0))
     frame_id: str = frame_param('chamber', 'frame of plant state and measurements')
@@ -103,7 +109,8 @@ class CameraParams:
         segment = SegmentParams(**{f.name: getattr(self, _SEGMENT_NAMES.get(f.name, f.name))
                                    for f in fields(SegmentParams)})
         tree = TreeParams(**{f.name: getattr(self, f.name) for f in fields(TreeParams)})
-        return PipelineParams(layout, segment, tree, self.max_fit_error_m)
+        return PipelineParams(layout, segment, tree, self.max_fit_error_m,
+                              self.max_unexplained)
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
@@ -111,7 +118,8 @@ _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 # they are published): what ``growspace-camera resegment`` and ``export`` take.
 PIPELINE_FIELDS = ('markers',
                    *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
-                   *(f.name for f in fields(TreeParams)), 'max_fit_error_m')
+                   *(f.name for f in fields(TreeParams)), 'max_fit_error_m',
+                   'max_unexplained')
 
 
 def pipeline_values(params: CameraParams) -> dict[str, Any]:

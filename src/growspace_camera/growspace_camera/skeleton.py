@@ -1,13 +1,16 @@
 """Plant mask -> skeleton graph: paths from each stem base, arc lengths, corners, tips.
 
 The mask's skeleton (``skimage.morphology.skeletonize``) is a pixel graph of 8-neighbours.
-Every skeleton pixel near the floor belongs to a stem base (sorted left to right: plant 0 is
-the leftmost, as in the simulator's layouts); Dijkstra from all bases at once gives each pixel
-its base and the path back to it, so crossing branches (loops in 2-D) still form trees. Along
+Each group of skeleton pixels near the floor may be a stem base (sorted left to right: plant 0
+is the leftmost, as in the simulator's layouts); Dijkstra from all bases at once gives each
+pixel its base and the path back to it, so crossing branches (loops in 2-D) still form trees.
+A group is a base only if it rises near vertical and, so grown, has a tip of its own: a leaf
+drooping across the soil line has neither, and is a leaf of the plant it hangs from. Along
 those paths arc length is summed over chords of a few pixels: counting 8-steps would make a
 line at 22.5 degrees 8 % too long, and any fixed pair of step weights is wrong for some
 direction (Dorst-Smeulders' make a vertical stem 5 % short). Short end branches that thinning
-leaves on thick stems (spurs) are pruned; the remaining end points are the tips.
+leaves on thick stems (spurs) are pruned, and so are the ends thinning leaves in the corners of
+a stem's square cut end; the remaining end points are the tips.
 ``growspace_camera.nodes`` turns the graph into the simulator's node arrays.
 """
 
@@ -41,6 +44,11 @@ class TreeParams:
             narrows to its tip, while a thinning spur ends inside the thick stem it leaves.
         corner_deg: A path turning by at least this much has a node there [deg].
         min_stem_m: A base carrying less skeleton than this is a speck, not a plant [m].
+        max_base_tilt_deg: A piece of plant reaching the floor is a stem base only if its
+            ``min_stem_m`` above the base band rise within this angle of vertical [deg]: the
+            simulator's first stem is vertical, and a leaf drooping across the soil line or a
+            branch lying on it meets it at a slant. (A leaf hanging steeply is told apart by
+            having no tip of its own: see ``skeleton_graph``.)
     """
 
     base_band_m: float = 0.03
@@ -49,6 +57,7 @@ class TreeParams:
     spur_taper: float = 0.5
     corner_deg: float = 15.0
     min_stem_m: float = 0.05
+    max_base_tilt_deg: float = 35.0
 
 
 @dataclass
@@ -70,6 +79,7 @@ class SkeletonGraph:
         root_x: (P,) each stem's x on the floor [m].
         pruned: Spurs pruned.
         unattached: Skeleton pixels no base reaches.
+        unexplained: Mask pixels in pieces of the mask that hold no kept stem base.
     """
 
     rows: np.ndarray
@@ -87,6 +97,7 @@ class SkeletonGraph:
     root_x: np.ndarray
     pruned: int
     unattached: int
+    unexplained: int
 
 
 def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
@@ -119,31 +130,56 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         raise CameraError(NO_PLANT, 'no plant in the photo (the mask is empty)')
     height, band_px = grid.shape[0], params.base_band_m / grid.pixel_m
     # A thick stem's skeleton stops about its radius above the cut end at the floor.
-    roots, root_cols = _roots(rows, cols, height, band_px + radius)
+    roots, root_cols, group = _roots(rows, cols, height, band_px + radius)
     if roots.size == 0:
         raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
                           f'within base_band_m = {params.base_band_m} m of z = 0')
+    src, dst, weight = _edges(rows, cols, mask.shape)
+    stem, tilt = _stem_bases(coo_matrix((weight, (src, dst)), shape=(n, n)).tocsr(), roots,
+                             group, rows, cols, radius, height, band_px,
+                             params.min_stem_m / grid.pixel_m, params)
+    if not stem.any():
+        tilts = ', '.join('too short' if np.isnan(t) else f'{t:.0f} deg' for t in tilt)
+        raise CameraError(NO_PLANT, f'no stem reaches the floor: {roots.size} piece(s) of '
+                          f'plant reach it, none a stem rising within max_base_tilt_deg = '
+                          f'{params.max_base_tilt_deg:g} of vertical (tilts: {tilts})')
+    roots, root_cols = roots[stem], root_cols[stem]
     root_cols = _stem_centres(mask, mask if coverage is None else coverage, root_cols,
                               band_px + radius[roots])
-    src, dst, weight = _edges(rows, cols, mask.shape)
-    # A virtual source joins every base at its height: arc length counts from z = 0.
-    graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
-                        (np.r_[src, np.full(roots.size, n)], np.r_[dst, roots])),
-                       shape=(n + 1, n + 1))
-    dist, pred = dijkstra(graph.tocsr(), directed=False, indices=n, return_predecessors=True)
-    pred = pred[:n].astype(np.int64)
-    pred[pred == n] = -1
-    reached = np.isfinite(dist[:n])
-    order = np.argsort(dist[:n], kind='stable')[:int(reached.sum())]
-    roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, dist[:n],
-                                                  reached, params.min_stem_m / grid.pixel_m)
-    if roots.size == 0:
-        raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
-                          f'of a stem at least min_stem_m = {params.min_stem_m} m tall')
-    ancestor = _ancestors(pred, CHORD_PX)
-    arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
-    removed, ends, pruned = _prune(order, pred, arc, _degree(src, dst, n), radius, roots,
-                                   max(params.spur_m / grid.pixel_m, 1.0), params)
+    degree = _degree(src, dst, n)
+    while True:
+        # A virtual source joins every base at its height: arc length counts from z = 0.
+        graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
+                            (np.r_[src, np.full(roots.size, n)], np.r_[dst, roots])),
+                           shape=(n + 1, n + 1))
+        dist, pred = dijkstra(graph.tocsr(), directed=False, indices=n,
+                              return_predecessors=True)
+        pred = pred[:n].astype(np.int64)
+        pred[pred == n] = -1
+        reached = np.isfinite(dist[:n])
+        order = np.argsort(dist[:n], kind='stable')[:int(reached.sum())]
+        roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, dist[:n],
+                                                      reached, params.min_stem_m / grid.pixel_m)
+        if roots.size == 0:
+            raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, '
+                              f'none of a stem at least min_stem_m = {params.min_stem_m} m '
+                              f'tall')
+        ancestor = _ancestors(pred, CHORD_PX)
+        arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
+        # The rest of each base's group in the band is the stem's cut end: no tips there.
+        base = (group >= 0) & np.isin(group, group[roots])
+        removed, ends, pruned = _prune(order, pred, arc, degree, radius, roots, base,
+                                       max(params.spur_m / grid.pixel_m, 1.0), params)
+        # Every plant grows up to a tip of its own. A leaf that droops from a stem onto the
+        # floor is longer than the stem below its petiole (it has to come down as far, and
+        # not straight down), so grown from both, the stem's base reaches the petiole first:
+        # the leaf's contact gets only a part of the leaf, with no tip of its own.
+        owner = _owners(order, pred, roots)
+        barren = np.ones(roots.size, bool)
+        barren[owner[ends]] = False
+        if not barren.any() or barren.all():
+            break
+        roots, root_cols = roots[~barren], root_cols[~barren]
     keep = ~removed[src] & ~removed[dst]
     junction = _degree(src[keep], dst[keep], n) >= 3
     return SkeletonGraph(
@@ -152,7 +188,19 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
         junction=junction, removed=removed, ends=ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
-        unattached=int(n - reached.sum()))
+        unattached=int(n - reached.sum()),
+        unexplained=_unexplained(mask[box], rows[roots] - top, cols[roots] - left))
+
+
+def _unexplained(mask: np.ndarray, root_rows: np.ndarray, root_cols: np.ndarray) -> int:
+    """Mask pixels in pieces (8-connected, as the skeleton is) that hold none of the roots:
+    plant the measured trees do not account for."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8),
+                                                               connectivity=8)
+    rooted = np.zeros(count, bool)
+    rooted[labels[root_rows, root_cols]] = True
+    rooted[0] = True  # the background
+    return int(stats[~rooted, cv2.CC_STAT_AREA].sum())
 
 
 def _centres(cover: np.ndarray, rows: np.ndarray, cols: np.ndarray,
@@ -184,21 +232,65 @@ def _centres(cover: np.ndarray, rows: np.ndarray, cols: np.ndarray,
 
 
 def _roots(rows: np.ndarray, cols: np.ndarray, height: int,
-           band_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+           band_px: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per group of touching skeleton pixels in the base band (per pixel: its height), its
-    lowest pixel and its median column; left to right."""
+    lowest pixel and its median column, left to right; and each skeleton pixel's group in
+    that order (-1: above the band)."""
+    group = np.full(rows.size, -1, np.int64)
     low = np.flatnonzero(rows >= height - band_px)
     if low.size == 0:
-        return low, np.zeros(0)
+        return low, np.zeros(0), group
     top = int(rows[low].min())  # the band's first row
     image = np.zeros((height - top + 2, int(cols.max()) + 3), np.uint8)
     image[rows[low] - top + 1, cols[low] + 1] = 1
     count, labels = cv2.connectedComponents(image, connectivity=8)
-    group = labels[rows[low] - top + 1, cols[low] + 1]
-    members = [low[group == g] for g in range(1, count)]
-    found = sorted(((m[np.argmax(rows[m])], float(np.median(cols[m]))) for m in members),
+    label = labels[rows[low] - top + 1, cols[low] + 1]
+    members = [low[label == g] for g in range(1, count)]
+    found = sorted(((m[np.argmax(rows[m])], float(np.median(cols[m])), m) for m in members),
                    key=lambda r: r[1])
-    return np.array([r[0] for r in found], np.int64), np.array([r[1] for r in found])
+    for k, (_, _, m) in enumerate(found):
+        group[m] = k
+    return (np.array([r[0] for r in found], np.int64), np.array([r[1] for r in found]),
+            group)
+
+
+def _stem_bases(graph, roots: np.ndarray, group: np.ndarray,  # noqa: ANN001 - sparse matrix
+                rows: np.ndarray, cols: np.ndarray, radius: np.ndarray, height: int,
+                band_px: float, rise_px: float,
+                params: TreeParams) -> tuple[np.ndarray, np.ndarray]:
+    """Which floor contacts rise as a stem does: near vertical (the simulator's first stem is
+    vertical; a leaf drooping across the soil line, or a branch lying on it, meets it at a
+    slant).
+
+    Per contact, the shortest skeleton path from it up to ``rise_px`` (the least a stem
+    carries, ``min_stem_m``) above the base band and its widest radius, taken where it is
+    above those: whatever lies in the band (a thick stem's cut end, forked by thinning into
+    its corners; a speck or a pot's rim touching it) stays out, and so do leaves joining the
+    stem above (they are not on the shortest path up). The principal axis of that stretch
+    gives the direction. Returns (rises as a stem, tilt from vertical [deg]; NaN when nothing
+    reaches that high) per contact."""
+    widest = np.zeros(roots.size)
+    np.maximum.at(widest, group[group >= 0], radius[group >= 0])
+    low = band_px + widest  # the stretch's bottom, per contact, above the floor [px]
+    near, pred = dijkstra(graph, directed=False, indices=roots, return_predecessors=True,
+                          limit=float(3.0 * (low.max() + rise_px)))
+    near, pred = near.reshape(roots.size, -1), pred.reshape(roots.size, -1)
+    above = height - 0.5 - rows  # each pixel's height above the floor [px]
+    tilt = np.full(roots.size, np.nan)  # NaN: nothing reaches that high
+    for k in range(roots.size):
+        top = np.flatnonzero(np.isfinite(near[k]) & (above >= low[k] + rise_px))
+        if top.size == 0:
+            continue  # too short to be a stem (``_real_stems`` drops it as a speck)
+        p, path = int(top[np.argmin(near[k][top])]), []
+        while p >= 0:
+            path.append(p)
+            p = int(pred[k, p])
+        path = np.array(path)
+        path = path[above[path] >= low[k]]
+        points = np.column_stack((rows[path], cols[path])).astype(float)
+        _, _, axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)
+        tilt[k] = np.degrees(np.arctan2(abs(axes[0][1]), abs(axes[0][0])))
+    return np.nan_to_num(tilt, nan=90.0) <= params.max_base_tilt_deg, tilt
 
 
 def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pred: np.ndarray,
@@ -207,13 +299,7 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     """Drop bases that carry less than ``min_px`` of skeleton (a speck of green on the soil
     line is not a plant: every plant has at least its first stem); their pixels become
     unattached."""
-    base = np.full(pred.size, -1, np.int64)
-    base[roots] = np.arange(roots.size)
-    pred_list, base_list = pred.tolist(), base.tolist()
-    for p in order.tolist():
-        if base_list[p] < 0:
-            base_list[p] = base_list[pred_list[p]]
-    base = np.array(base_list)
+    base = _owners(order, pred, roots)
     height = np.zeros(roots.size)
     np.maximum.at(height, base[order], dist[order])
     keep = height >= min_px
@@ -223,6 +309,17 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     reached = np.zeros_like(reached)
     reached[order] = True
     return roots[keep], root_cols[keep], order, reached
+
+
+def _owners(order: np.ndarray, pred: np.ndarray, roots: np.ndarray) -> np.ndarray:
+    """Each pixel's base (an index into ``roots``; -1 for a pixel no base reaches)."""
+    base = np.full(pred.size, -1, np.int64)
+    base[roots] = np.arange(roots.size)
+    pred_list, base_list = pred.tolist(), base.tolist()
+    for p in order.tolist():
+        if base_list[p] < 0:
+            base_list[p] = base_list[pred_list[p]]
+    return np.array(base_list, np.int64)
 
 
 def _stem_centres(mask: np.ndarray, cover: np.ndarray, columns: np.ndarray,
@@ -305,11 +402,13 @@ def _turning(ancestor: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.nda
 
 
 def _prune(order: np.ndarray, pred: np.ndarray, arc: np.ndarray, degree: np.ndarray,
-           radius: np.ndarray, roots: np.ndarray, spur_px: float,
+           radius: np.ndarray, roots: np.ndarray, base: np.ndarray, spur_px: float,
            params: TreeParams) -> tuple[np.ndarray, list[int], int]:
     """Remove spurs: end branches shorter than ``spur_px`` or ``spur_radii`` radii of the
-    stem they leave whose end is not thinner than ``spur_taper`` of that radius.
-    Returns (removed pixels, kept end points, spurs removed)."""
+    stem they leave whose end is not thinner than ``spur_taper`` of that radius, and every
+    end point in a stem's ``base`` (thinning runs a branch into each corner of a stem's square
+    cut end: they narrow to their ends as a shoot does, but no shoot grows down into the
+    floor). Returns (removed pixels, kept end points, spurs removed)."""
     n = pred.size
     is_root = np.zeros(n, bool)
     is_root[roots] = True
@@ -324,8 +423,8 @@ def _prune(order: np.ndarray, pred: np.ndarray, arc: np.ndarray, degree: np.ndar
         if is_root[p]:
             continue
         a = anchor[p]
-        if not is_root[a] and arc[p] - arc[a] < max(spur_px, params.spur_radii * radius[a]) \
-                and radius[p] > params.spur_taper * radius[a]:
+        short = not is_root[a] and arc[p] - arc[a] < max(spur_px, params.spur_radii * radius[a])
+        if base[p] or (short and radius[p] > params.spur_taper * radius[a]):
             pruned += 1
             while p != a:
                 removed[p] = True
