@@ -111,8 +111,9 @@ BAD_ARGUMENTS = [
      "argument --namespace-b: 'a//b' is not allowed"),
     ('growspace-camera', ['export', '{bag}', 'seen', '--namespace', 'a b'],
      "argument --namespace: 'a b' is not allowed"),
-    ('growspace-replay', ['info', 'nosuch.mcap'], "argument bag: 'nosuch.mcap': the file does"),
-    ('growspace-replay', ['info', '{dir}'], "argument bag: '{dir}' is not a file"),
+    ('growspace-replay', ['info', 'nosuch.mcap'],
+     "argument bag: 'nosuch.mcap': no such file or folder"),
+    ('growspace-replay', ['info', '{dir}'], '{dir} is a directory without recording files'),
     ('growspace-replay', ['check', 'nosuch.mcap'], "argument bag: 'nosuch.mcap'"),
     ('growspace-replay', ['check', '{file}'], 'is not an MCAP file'),  # and no progress bar
     ('growspace-replay', ['check', '{bag}', '--digit-source', 'nope'],

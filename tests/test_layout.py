@@ -21,7 +21,7 @@ LAYERS = (
     ('core',),
     ('digits', 'render'),
     ('simulation',),
-    ('envs', 'agents', 'ros'),
+    ('envs', 'agents', 'ros', 'arguments'),
     ('recording', 'view'),
     ('node',),
     ('replay', 'learn', 'sweep', 'growspace_gym_bridge', 'growspace_gantry',

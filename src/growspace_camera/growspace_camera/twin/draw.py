@@ -15,24 +15,22 @@ otherwise pass unseen.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import functools
 import math
 
 import cv2
 import numpy as np
 
 from growspace_camera.markers import MarkerLayout
+from growspace_camera.twin import optics, surfaces
+from growspace_camera.twin.surfaces import CANVAS_M
 from growspace_camera.twin.pose import look_at_plane, Pose
 from growspace_camera.twin.variation import draw_rig, jitter_for, RigDraw, Variation, VARY_SALT
 from growspace_sim.core.chamber import Chamber
 
-CANVAS_M = 0.001  # canvas pixel [m]: about one photo pixel at the default distance
 LIGHT_GRID_M = 0.01  # resolution of the illumination map [m]
 POT_DEPTH_M, POT_TOP_M, POT_BOTTOM_M = 0.08, 0.10, 0.075
 SHIFT = 4  # cv2 fixed-point bits for sub-pixel drawing
-BACKDROP_LEVEL = (190.0, 225.0)  # grey level of the backdrop under the photo light alone
 WHITE = 235.0  # the level a rig's exposure keeps the brightest backdrop under
-NOISE_SEED = 20_24  # the sensor noise bank's own seed (photos crop it at drawn offsets)
 
 
 @dataclass(frozen=True)
@@ -125,10 +123,10 @@ class PhotoTwin:
         if fixed:  # the photo's own draw is made all the same, so the rest stay aligned
             pose = self._pose(np.random.default_rng([rig_seed, VARY_SALT, 3]),
                               (x0, z0, x1, z1), j)
-        canvas = _backdrop(rng, x0, z0, x1, z1)
-        level = BACKDROP_LEVEL[1]
+        canvas = surfaces.board(rng, x0, z0, x1, z1)
+        level = surfaces.BACKDROP_LEVEL[1]
         if rig.backdrop != 'grey':
-            canvas, level = _rig_backdrop(np.random.default_rng([seed, VARY_SALT, 1]),
+            canvas, level = surfaces.rig_backdrop(np.random.default_rng([seed, VARY_SALT, 1]),
                                           canvas.shape, rig.backdrop)
         to_canvas = _Canvas(x0, z1)
         roots = chamber.pos[:cfg.plant_count]
@@ -146,14 +144,14 @@ class PhotoTwin:
         brightest = level * float(lit.max())  # the backdrop where most light falls
         exposure = float(rng.uniform(*j.exposure)) * WHITE / brightest
         lit *= canvas
-        photo = _room(rng, self.size)
+        photo = surfaces.room(rng, self.size)
         warp = pose.homography() @ to_canvas.to_plane
         cv2.warpPerspective(lit, warp, self.size, photo, cv2.INTER_LINEAR,
                             cv2.BORDER_TRANSPARENT)
         if rig.distortion_k1:
-            photo = _distort(photo, rig.distortion_k1)
+            photo = optics.distort(photo, rig.distortion_k1)
         conditions = {'exposure': exposure, 'lamp': lamp}
-        photo *= exposure * _vignette(self.size, float(rng.uniform(*j.vignette)))[..., None]
+        photo *= exposure * optics.vignette(self.size, float(rng.uniform(*j.vignette)))[..., None]
         blur = float(rng.uniform(*j.blur_px))
         cv2.GaussianBlur(photo, (0, 0), blur, dst=photo)
         read, shot = float(rng.uniform(*j.read_noise)), float(rng.uniform(*j.shot_noise))
@@ -162,7 +160,7 @@ class PhotoTwin:
         sigma *= shot
         sigma += read * read
         np.sqrt(sigma, out=sigma)
-        sigma *= _noise(rng, photo.shape)
+        sigma *= optics.noise(rng, photo.shape)
         photo += sigma
         quality = int(rng.integers(j.jpeg_quality[0], j.jpeg_quality[1] + 1))
         ok, jpeg = cv2.imencode('.jpg', np.clip(photo, 0, 255).astype(np.uint8),
@@ -218,71 +216,6 @@ class _Canvas:
     def fixed(self, points: np.ndarray) -> np.ndarray:
         """Canvas pixels in OpenCV's fixed point (``SHIFT`` fractional bits), int32."""
         return np.rint(self.px(points) * (1 << SHIFT)).astype(np.int32)
-
-
-def _backdrop(rng: np.random.Generator, x0: float, z0: float, x1: float,
-              z1: float) -> np.ndarray:
-    """A matte, slightly tinted board with low-frequency blotches and fine grain."""
-    w = int(math.ceil((x1 - x0) / CANVAS_M))
-    h = int(math.ceil((z1 - z0) / CANVAS_M))
-    base = rng.uniform(*BACKDROP_LEVEL) * (1.0 + rng.uniform(-0.04, 0.04, 3))
-    coarse = rng.standard_normal((h // 40 + 2, w // 40 + 2, 3)).astype(np.float32)
-    coarse = base.astype(np.float32) * (1.0 + 0.05 * cv2.GaussianBlur(coarse, (0, 0), 1.0))
-    board = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
-    grain = rng.standard_normal((h // 2 + 1, w // 2 + 1), dtype=np.float32) * 4.0
-    board += cv2.resize(grain, (w, h), interpolation=cv2.INTER_LINEAR)[..., None]
-    return np.clip(board, 0, 255, out=board).astype(np.uint8)
-
-
-def _room(rng: np.random.Generator, size: tuple[int, int]) -> np.ndarray:
-    """What the photo shows around the backdrop: a dim, uneven room (float32 BGR)."""
-    w, h = size
-    grey = rng.uniform(30.0, 110.0, (6, 10, 1))
-    coarse = (grey * rng.uniform(0.85, 1.15, (6, 10, 3))).astype(np.float32)  # dull colours
-    return cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
-
-
-def _rig_backdrop(rng: np.random.Generator, shape: tuple[int, ...],
-                  kind: str) -> tuple[np.ndarray, float]:
-    """A backdrop of another kind than the grey board; returns it and its brightest level.
-
-    white: a near-white board; wood: plywood, warm, with grain along x; fabric: a tinted
-    weave with folds; paint: a light wall with uneven coats and brush streaks.
-    """
-    h, w = shape[:2]
-
-    def field(cells_m: float, amount: float) -> np.ndarray:  # smooth noise, +- amount
-        ch, cw = int(h * CANVAS_M / cells_m) + 2, int(w * CANVAS_M / cells_m) + 2
-        coarse = rng.standard_normal((ch, cw)).astype(np.float32)
-        return amount * cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
-
-    if kind == 'white':
-        base = rng.uniform(225.0, 245.0) * (1.0 + rng.uniform(-0.02, 0.02, 3))
-        shade = 1.0 + field(0.05, 0.02)
-    elif kind == 'wood':
-        base = np.array([rng.uniform(95, 135), rng.uniform(150, 185), rng.uniform(195, 225)])
-        rows = np.arange(h, dtype=np.float32)[:, None]
-        period = rng.uniform(4.0, 14.0)  # mm between grain lines
-        cols = np.arange(w, dtype=np.float32)[None, :]
-        phase = field(0.04, 6.0) + cols * rng.uniform(-0.05, 0.05)  # wavy, slanted lines
-        grain = np.sin(2 * np.pi * (rows + phase) / period)
-        shade = 1.0 + rng.uniform(0.04, 0.12) * grain + field(0.1, 0.05)
-    elif kind == 'fabric':
-        tints = ((205, 215, 220), (215, 205, 190), (190, 200, 205), (200, 200, 200))
-        base = np.array(tints[int(rng.integers(len(tints)))], float) * rng.uniform(0.85, 1.05)
-        weave = rng.uniform(1.5, 3.0)  # mm
-        y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-        shade = (1.0 + 0.04 * np.sin(2 * np.pi * x / weave) * np.sin(2 * np.pi * y / weave)
-                 + field(0.12, 0.07))
-    else:  # paint
-        base = rng.uniform(200.0, 235.0) * (1.0 + rng.uniform(-0.03, 0.03, 3))
-        streaks = cv2.resize(rng.standard_normal((8, w)).astype(np.float32), (w, h),
-                             interpolation=cv2.INTER_LINEAR)
-        shade = 1.0 + field(0.15, 0.06) + field(0.03, 0.02) + 0.02 * streaks
-    board = shade[..., None].astype(np.float32) * np.asarray(base, np.float32)
-    grain = rng.standard_normal((h // 2 + 1, w // 2 + 1), dtype=np.float32) * 3.0
-    board += cv2.resize(grain, (w, h), interpolation=cv2.INTER_LINEAR)[..., None]
-    return np.clip(board, 0, 255).astype(np.uint8), float(np.max(base))
 
 
 def _pot(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, x: float,
@@ -418,21 +351,6 @@ def _leaves(canvas: np.ndarray, to: _Canvas, rng: np.random.Generator, chamber: 
                      cv2.LINE_AA, SHIFT)
 
 
-def _distort(photo: np.ndarray, k1: float) -> np.ndarray:
-    """Radial lens distortion (k1 < 0 barrel, > 0 pincushion), on radii scaled by half the
-    photo's diagonal."""
-    h, w = photo.shape[:2]
-    x = (np.arange(w, dtype=np.float32) - 0.5 * (w - 1))
-    y = (np.arange(h, dtype=np.float32) - 0.5 * (h - 1))
-    half = 0.5 * math.hypot(w, h)
-    r2 = (x[None, :] ** 2 + y[:, None] ** 2) / half ** 2
-    # The photo pixel at distorted radius r shows what the pinhole puts at r (1 + k1 r^2).
-    gain = 1.0 + k1 * r2
-    map_x = (x[None, :] * gain + 0.5 * (w - 1)).astype(np.float32)
-    map_y = (y[:, None] * gain + 0.5 * (h - 1)).astype(np.float32)
-    return cv2.remap(photo, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-
-
 def _bgr(hsv: tuple[float, float, float]) -> tuple[int, int, int]:
     h, s, v = hsv
     pixel = np.uint8([[[int(np.clip(h, 0, 179)), int(np.clip(s, 0, 255)),
@@ -495,32 +413,3 @@ def _beam(x: np.ndarray, z: np.ndarray, chamber: Chamber, rig: RigDraw) -> np.nd
         bar = (0.5 * (1.0 - rig.lamp_gap) * pitch - np.abs(offset)) / edge
         inside = np.minimum(inside, bar)
     return inside
-
-
-@functools.cache
-def _noise_bank(shape: tuple[int, ...]) -> np.ndarray:
-    """Standard normal noise a little larger than a photo, drawn once per photo size (drawing
-    6 million normals for every photo would cost more than everything else the twin does)."""
-    h, w, c = shape
-    bank = np.random.default_rng(NOISE_SEED).standard_normal((h + 64, w + 64, c), np.float32)
-    bank.flags.writeable = False
-    return bank
-
-
-def _noise(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
-    """A photo's noise: a crop of the bank at a drawn offset, drawn flips and sign."""
-    h, w = shape[:2]
-    dy, dx = (int(v) for v in rng.integers(0, 65, 2))
-    crop = _noise_bank(tuple(shape))[dy:dy + h, dx:dx + w]
-    flip_rows, flip_cols, sign = (bool(v) for v in rng.integers(0, 2, 3))
-    crop = crop[::-1] if flip_rows else crop
-    crop = crop[:, ::-1] if flip_cols else crop
-    return -crop if sign else crop
-
-
-def _vignette(size: tuple[int, int], strength: float) -> np.ndarray:
-    w, h = size
-    x = (np.arange(w, dtype=np.float32) - 0.5 * w) / (0.5 * w)
-    y = (np.arange(h, dtype=np.float32) - 0.5 * h) / (0.5 * w)
-    r2 = x[None, :] ** 2 + y[:, None] ** 2
-    return 1.0 - strength * r2 / r2.max()
