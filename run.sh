@@ -167,11 +167,12 @@ case "$cmd" in
     fi
     setup .venv-compat .venv-compat/ws "$py312" requirements.txt requirements-compat.txt
     sandboxed .venv-compat/bin/python -m pytest -q -p no:cacheprovider "$@" \
-      tests/test_core.py tests/test_kernels.py tests/test_envs.py tests/test_vector_env.py \
-      tests/test_digits.py tests/test_agents.py \
-      tests/test_episode_hash.py tests/test_msgs_wire.py tests/test_ros_node.py \
-      tests/test_bridge.py tests/test_view.py tests/test_view_ros.py tests/test_bag_damage.py \
-      tests/test_camera_vision.py tests/test_camera_skeleton.py ;;
+      tests/sim/test_core.py tests/sim/test_kernels.py tests/sim/test_envs.py \
+      tests/sim/test_vector_env.py tests/sim/test_digits.py tests/sim/test_agents.py \
+      tests/sim/test_episode_hash.py tests/node/test_msgs_wire.py tests/node/test_ros_node.py \
+      tests/bridge/test_bridge.py tests/node/test_view.py tests/node/test_view_ros.py \
+      tests/recording/test_bag_damage.py tests/camera/test_camera_vision.py \
+      tests/camera/test_camera_skeleton.py ;;
   help|-h|--help) sed -n '2,9p' "$0" ;;
   *) sed -n '2,9p' "$0" >&2; echo "run.sh: unknown subcommand '$cmd'" >&2; exit 2 ;;
 esac

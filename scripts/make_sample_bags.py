@@ -2,10 +2,11 @@
 """Regenerate the sample recordings in ``bags/``: one oracle episode per challenge and setting.
 
 The files are deterministic (simulated time, fixed seeds), so regenerating them with the same
-code gives the same bytes (``tests/test_replay.py`` checks the tracked ones are what this script
-writes: regenerate them with ``--force`` after a change to the recording's messages, channels
-or metadata); ``growspace-replay check bags/<file>`` proves each one reproduces. A challenge
-without an oracle is played by the random agent (seeded), in ``random_<challenge>_<setting>``.
+code gives the same bytes (``tests/recording/test_replay.py`` checks the tracked ones are what
+this script writes: regenerate them with ``--force`` after a change to the recording's messages,
+channels or metadata); ``growspace-replay check bags/<file>`` proves each one reproduces. A
+challenge without an oracle is played by the random agent (seeded), in
+``random_<challenge>_<setting>``.
 
 Usage: PYTHONPATH=src/growspace_sim python scripts/make_sample_bags.py [--out bags] [--force]
 """

@@ -5,7 +5,7 @@ Both show the same frame: control easy, seed 0, the oracle steering, after ``--s
 built in process from the messages sim_node publishes (``view.sample``). ``view_image.png`` is
 ``camera/image_view`` (512 px); ``view_markers.png`` is ``plant/markers`` drawn from the
 MarkerArray itself, seen from the front (``view.marker_png``), the picture RViz or Foxglove's
-3D panel shows from that side. tests/test_view.py checks that the markers picture still
+3D panel shows from that side. tests/node/test_view.py checks that the markers picture still
 matches what this script draws.
 
 Usage (the workspace's venv): python scripts/make_view_screenshot.py [--step 30]

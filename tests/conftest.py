@@ -1,15 +1,25 @@
 """Test session set-up: ROS 2 stays on this host, in a domain of its own.
 
-The packages are installed by the colcon build that ``./run.sh`` sources, so nothing is added to
-``sys.path`` here. ``./run.sh test`` already runs the session in a loopback-only network
-namespace where the OS allows one; the loopback defaults and a random ROS domain keep a session
-started any other way off the network and apart from other sessions on the same host.
+The packages are installed by the colcon build that ``./run.sh`` sources, so only the test
+folders themselves are added to ``sys.path`` here. ``./run.sh test`` already runs the session in
+a loopback-only network namespace where the OS allows one; the loopback defaults and a random
+ROS domain keep a session started any other way off the network and apart from other sessions
+on the same host.
 """
 
 import os
 import random
+import sys
 
 from growspace_sim.ros import loopback
+
+# tests/ mirrors the packages (sim, node, bridge, recording, rig, gantry, camera, tools); a few
+# test modules reuse another's rig or fixture by import (test_gantry_node's Rig, ...), so every
+# folder is importable whatever order pytest collects them in (file names stay unique).
+_HERE = os.path.dirname(os.path.abspath(__file__))
+_FOLDERS = sorted(entry.path for entry in os.scandir(_HERE)
+                  if entry.is_dir() and not entry.name.startswith(('_', '.', 'data')))
+sys.path[1:1] = _FOLDERS
 
 loopback.confine()
 if 'GROWSPACE_TEST_DOMAIN' in os.environ:
@@ -20,11 +30,10 @@ else:  # 1..101: domain ids whose ports fit with Fast DDS's defaults
 
 def child_env() -> dict:
     """Environment for a child Python process: ours (workspace sourced, loopback, domain), and
-    the tests directory importable, as it is here."""
+    the tests directories importable, as they are here."""
     env = dict(os.environ)
-    tests = os.path.dirname(os.path.abspath(__file__))
-    env['PYTHONPATH'] = os.pathsep.join([tests] + ([env['PYTHONPATH']] if env.get('PYTHONPATH')
-                                                   else []))
+    env['PYTHONPATH'] = os.pathsep.join([_HERE, *_FOLDERS] + ([env['PYTHONPATH']]
+                                                              if env.get('PYTHONPATH') else []))
     return env
 
 

@@ -6,7 +6,7 @@ of 64, 4 epochs) that is 128 host-side gathers and 128 small host-to-device copi
 ``DeviceRolloutBuffer`` copies the flattened rollout to the device once per update and gathers
 each minibatch there. It draws the same permutation (``np.random.permutation``, so the same
 global numpy stream) and holds the same values (observations stay uint8, as SB3 stores them),
-so every minibatch, and so the training, is the same; tests/test_learn.py compares the two
+so every minibatch, and so the training, is the same; tests/sim/test_learn.py compares the two
 buffers' minibatches element by element.
 """
 

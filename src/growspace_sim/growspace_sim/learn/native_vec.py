@@ -5,7 +5,7 @@ adapts batched simulators (EnvPool, Procgen) the same way. ``NativeVecEnv`` step
 one call and gives SB3 what ``DummyVecEnv`` over N ``GrowSpaceEnv`` gives for the same seeds:
 the same observations, rewards and dones; at an episode's end ``terminal_observation`` and
 ``TimeLimit.truncated`` in that chamber's info and the next episode's first observation in its
-place (tests/test_learn.py compares the two step by step). Wrap it in ``VecMonitor`` for the
+place (tests/sim/test_learn.py compares the two step by step). Wrap it in ``VecMonitor`` for the
 episode returns that ``Monitor`` gives single envs (``train.make_env(..., vec='native')`` does).
 
 Each chamber's info has the single env's keys except ``tips`` (the vector env does not batch

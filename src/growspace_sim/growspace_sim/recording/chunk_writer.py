@@ -2,7 +2,8 @@
 written by a background thread, so a hard kill loses at most the open chunk.
 
 Records follow the MCAP specification and are read back by mcap's own reader in the tests
-(tests/test_recording.py); ``scripts/bench_recording.py`` measures it against mcap's writer.
+(tests/recording/test_recording.py); ``scripts/bench_recording.py`` measures it against mcap's
+writer.
 """
 
 from __future__ import annotations

@@ -310,7 +310,7 @@ def _cdr_functions(typename: str) -> tuple[Any, Any]:
     """rosbags' generated size and little-endian writer of a type, looked up once.
 
     ``Typestore.serialize_cdr`` does exactly this per call; keeping the two functions saves
-    the lookup on the node's hot path (the bytes are the same, tests/test_msgs_wire.py).
+    the lookup on the node's hot path (the bytes are the same, tests/node/test_msgs_wire.py).
     """
     msgdef = typestore().get_msgdef(typename)
     return msgdef.getsize_cdr, msgdef.serialize_cdr_le
@@ -330,7 +330,7 @@ def deserialize(data: bytes | memoryview, typename: str, any_tail: bool = False)
     Args:
         data: The CDR payload, possibly followed by up to 7 pad bytes: rmw_fastrtps (Fast CDR)
             pads some messages to 8 bytes, beyond the 3 that ``Typestore.deserialize_cdr``
-            accepts (tests/test_msgs_wire.py).
+            accepts (tests/node/test_msgs_wire.py).
         typename: The expected message type name.
         any_tail: Accept any number of bytes after the message: only for bytes from
             ``rclpy.serialization.serialize_message`` in this process, whose length is Fast

@@ -293,7 +293,7 @@ def _set_aside_if_unreadable(path: Path, trials: int) -> None:
     Tune rewrites its state at every checkpoint: ``experiment_state-<session>.json`` (which
     trials finished) and its search algorithm's ``basic-variant-state-<session>.json`` (a
     pickle), one after the other. A kill can leave one cut short (one kill in seven in
-    tests/test_sweep.py, which has Tune write them at every step): Tune then logs a traceback
+    tests/sim/test_sweep.py, which has Tune write them at every step): Tune then logs a traceback
     and quietly runs every trial again, beside the old ones. A kill between the two writes can
     leave a trial running in the search state that the experiment state has finished: Ray 2.60
     then waits for it for ever with ``--workers`` set (the search algorithm's concurrency limit

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 spec = importlib.util.spec_from_file_location('learning_budget',
                                               ROOT / 'scripts' / 'learning_budget.py')
 budget = importlib.util.module_from_spec(spec)

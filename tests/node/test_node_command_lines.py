@@ -19,7 +19,7 @@ from ros_helpers import NodeProcess
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 NODES = ('sim_node', 'gantry_node', 'view_node')
 
 

@@ -10,7 +10,7 @@ import subprocess
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(args: list[str], cwd: Path, **env: str) -> subprocess.CompletedProcess:
@@ -29,9 +29,9 @@ def test_help_exits_0_and_an_unknown_subcommand_2() -> None:
 def test_test_passes_pytests_arguments_through() -> None:
     """A file runs alone; no path runs the whole suite (as CI's ./run.sh test does); -m
     "not slow" the quick tier. (run.sh used to add tests/ to whatever it was given.)"""
-    one = _run(['test', 'tests/test_layout.py', '-vv', '-p', 'no:cacheprovider'], ROOT)
+    one = _run(['test', 'tests/tools/test_layout.py', '-vv', '-p', 'no:cacheprovider'], ROOT)
     ran = re.findall(r'^(\S+)::\S+ PASSED', one.stdout, re.M)
-    assert one.returncode == 0 and ran and set(ran) == {'tests/test_layout.py'}, one.stdout
+    assert one.returncode == 0 and ran and set(ran) == {'tests/tools/test_layout.py'}, one.stdout
     collected = {}
     for tier, args in (('all', []), ('tests', ['tests']), ('quick', ['-m', 'not slow'])):
         out = _run(['test', '--collect-only', '-p', 'no:cacheprovider', *args], ROOT)
@@ -39,9 +39,9 @@ def test_test_passes_pytests_arguments_through() -> None:
         collected[tier] = set(re.findall(r'^(tests/\S+::\S+)$', out.stdout, re.M))
     assert collected['all'] == collected['tests'] and len(collected['all']) > 500
     assert collected['quick'] < collected['all']
-    assert 'tests/test_run_sh.py::test_test_passes_pytests_arguments_through' \
+    assert 'tests/tools/test_run_sh.py::test_test_passes_pytests_arguments_through' \
         not in collected['quick']
-    assert 'tests/test_run_sh.py::test_help_exits_0_and_an_unknown_subcommand_2' \
+    assert 'tests/tools/test_run_sh.py::test_help_exits_0_and_an_unknown_subcommand_2' \
         in collected['quick']
 
 

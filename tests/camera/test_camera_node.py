@@ -275,13 +275,17 @@ def test_missing_path_missing_folder_and_unreadable_file_are_three_messages(tmp_
     assert folder == f'folder {tmp_path}/gone/ does not exist'
     assert folder_glob.startswith(f'folder {tmp_path}/gone (of ')
     assert unreadable.endswith('none of its files is a photo OpenCV can read')
-    # The console tool says the same three things.
+    # The console tool: a missing path or a folder is refused with its arguments, before any
+    # photo is measured (exit 2); a file OpenCV cannot read is named with what it holds.
     from growspace_camera.cli import main
-    code = main(['measure', str(tmp_path / 'gone.jpg'), str(tmp_path), str(tmp_path / 'bad.jpg')])
+    for path, words in ((tmp_path / 'gone.jpg', 'the file does not exist'),
+                        (tmp_path, 'is not a file')):
+        with pytest.raises(SystemExit) as exit_:
+            main(['measure', str(path)])
+        assert exit_.value.code == 2 and words in capsys.readouterr().err
+    code = main(['measure', str(tmp_path / 'bad.jpg')])
     lines = capsys.readouterr().out.splitlines()
     assert code == 1 and lines == [
-        f'NOT MEASURED: {tmp_path}/gone.jpg does not exist',
-        f'NOT MEASURED: {tmp_path} is a folder, not a photo',
         f'NOT MEASURED: {tmp_path}/bad.jpg is not a photo OpenCV can read (40 bytes, '
         "starting b'\\x00\\x00\\x00\\x00\\x00\\x00\\x00\\x00')"]
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-SRC = Path(__file__).resolve().parents[1] / 'src'
+SRC = Path(__file__).resolve().parents[2] / 'src'
 SIM = SRC / 'growspace_sim' / 'growspace_sim'
 # Bottom to top; a module may import its own layer and the layers below. Inside growspace_sim
 # a layer is a subpackage or top-level module; the other packages sit above the simulator's
@@ -86,7 +86,7 @@ def test_no_import_runs_up_the_layers():
         if module == 'growspace_sim':
             continue  # the package's face: its version, and it registers the Gymnasium ids
         level = _layer(module)
-        assert level is not None, f'{module} is in no layer of tests/test_layout.py'
+        assert level is not None, f'{module} is in no layer of tests/tools/test_layout.py'
         for imported in _imports(path, module):
             if imported == 'growspace_sim':
                 continue  # only __version__ lives there

@@ -20,55 +20,57 @@ import pytest
 
 from conftest import child_env
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]
 SAMPLE = 'bags/oracle_control_easy.mcap'
 RUN = 'run here (this file)'
 # (pattern on the command, how it is checked). Order matters: the first match wins.
 WHERE = [
-    (r'^\./run\.sh demo$', 'covered: tests/test_demo.py runs the demo, recordings checked'),
+    (r'^\./run\.sh demo$', 'covered: tests/tools/test_demo.py runs the demo, recordings checked'),
     (r'^\./run\.sh test$', 'CI: .ci/run runs it; it is this suite'),
-    (r'^\./run\.sh test ', "pytest's arguments, passed through: tests/test_run_sh.py runs a "
+    (r'^\./run\.sh test ', "pytest's arguments, passed through: tests/tools/test_run_sh.py runs a "
                            'file, collects the suite and the quick tier through run.sh'),
     (r'^eval "\$\(\./run\.sh env\)"$', RUN),
     (r'^colcon build --symlink-install$', RUN),
     (r'^ros2 ', 'needs ros2cli / ros2 launch, not on PyPI (observed by hand: README, ROS 2)'),
-    (r'^teleop ', 'needs a terminal: tests/test_teleop.py drives it through a pty'),
-    (r'^gantry_node ', 'needs a serial device: tests/test_gantry_docs.py runs it as written '
-                       'against the GRBL emulator'),
-    (r'^growspace-gantry-gcode ', 'covered: tests/test_gantry_docs.py runs it as written'),
-    (r'^growspace-replay play BAG --step-period ', 'needs the gantry: tests/test_gantry_docs.py '
-                                                   'parses it, tests/test_replay_steps.py plays'),
-    (r'^growspace-replay play run\.mcap --step-period ', 'needs a lockstep node: '
-                                                         'tests/test_replay_steps.py plays it'),
+    (r'^teleop ', 'needs a terminal: tests/tools/test_teleop.py drives it through a pty'),
+    (r'^gantry_node ', 'needs a serial device: tests/gantry/test_gantry_docs.py runs it as '
+                       'written against the GRBL emulator'),
+    (r'^growspace-gantry-gcode ', 'covered: tests/gantry/test_gantry_docs.py runs it as written'),
+    (r'^growspace-replay play BAG --step-period ',
+     'needs the gantry: tests/gantry/test_gantry_docs.py parses it, '
+     'tests/recording/test_replay_steps.py plays'),
+    (r'^growspace-replay play run\.mcap --step-period ',
+     'needs a lockstep node: tests/recording/test_replay_steps.py plays it'),
     (r'^(sim_node|view_node) --ros-args', RUN),
     (r'^camera_node .*source:=/dev/video', 'needs a camera (V4L2): tests read photos and videos '
-                                          'instead (tests/test_camera_*.py)'),
+                                          'instead (tests/camera/)'),
     (r'^camera_node --ros-args', RUN),
-    (r'^growspace-camera (resegment|export) ', 'needs a rig recording (gantry_node with a '
-                                              'camera): tests/test_camera_resegment.py makes one '
-                                              'and runs these lines as written'),
+    (r'^growspace-camera (resegment|export) ',
+     'needs a rig recording (gantry_node with a camera): tests/camera/test_camera_resegment.py '
+     'makes one and runs these lines as written'),
     (r'^growspace-camera ', RUN),
     (r'^python -m growspace_sim\.tools\.pub ', RUN),
     (r'^growspace-replay ', RUN),
     (r'^growspace-rig run .*--chamber attach ', 'needs a running lockstep chamber (the rig): '
-                                               'tests/test_rig_run.py runs sim_node instead'),
-    (r'^growspace-rig (run|resume|status) runs/exp1', 'covered: tests/test_rig_run.py runs '
+                                               'tests/rig/test_rig_run.py runs sim_node instead'),
+    (r'^growspace-rig (run|resume|status) runs/exp1', 'covered: tests/rig/test_rig_run.py runs '
                                                      '`run`, SIGKILL, `resume` on sim_node; '
-                                                     'tests/test_rig_rundir.py `status`'),
+                                                     'tests/rig/test_rig_rundir.py `status`'),
     (r'^(growspace-sweep .*--address HEAD_IP|export RAY_AUTH_MODE|ray |mkdir -p ~/\.ray |'
      r'RAY_ARGS=|\(umask 077 && ray get-auth-token|ssh OTHER )',
      'the cluster recipe needs machines (walked by hand on two namespaced nodes: README); '
-     'one loopback node with a token: tests/test_sweep.py'),
+     'one loopback node with a token: tests/sim/test_sweep.py'),
     (r'^growspace-sweep config/sweeps/case_studies\.yaml$', 'needs torch (the learn extra) and '
                                                           'hours of training'),
-    (r'^growspace-sweep ', 'covered: tests/test_sweep.py runs evaluation sweeps'),
+    (r'^growspace-sweep ', 'covered: tests/sim/test_sweep.py runs evaluation sweeps'),
     (r'^(pip install -r requirements-learn\.txt|growspace-train |growspace-compare --run )',
-     'needs torch (the learn extra): tests/test_learn.py where it is installed'),
+     'needs torch (the learn extra): tests/sim/test_learn.py where it is installed'),
     (r'^python scripts/case_studies\.py ', 'a record of past runs: the script is in git '
                                            'history (920d50b), docs/baselines.md says so'),
     (r'^python scripts/learning_budget\.py ', 'needs torch and hours on a GPU machine: '
-     'tests/test_learn.py tests its resume and device buffer; docs/baselines.md records its run'),
+     'tests/sim/test_learn.py tests its resume and device buffer; docs/baselines.md records its '
+     'run'),
 ]
 
 

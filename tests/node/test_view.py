@@ -2,7 +2,7 @@
 pictures, and ``growspace-replay export --view``.
 
 Frames are built with ``Scene`` from the messages a chamber publishes, made in process
-(``view.sample``); tests/test_view_ros.py runs the node itself.
+(``view.sample``); tests/node/test_view_ros.py runs the node itself.
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ from growspace_sim.view.sample import episode_messages, feed
 
 W = H = 0.84
 TWIG = 0.015 * W  # branch_thickness x chamber width [m]
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -248,7 +250,7 @@ def test_readme_pictures_show_what_the_view_sends() -> None:
     from growspace_sim.view import marker_png
     from growspace_sim.view.sample import readme_frame
 
-    docs = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'docs')
+    docs = os.path.join(ROOT, 'docs')
     frame = readme_frame(Scene())
     array = markers.marker_array(frame)
     for name, now in (('view_markers.png', marker_png.draw(array, 512)),
@@ -277,7 +279,7 @@ def test_export_view_adds_markers_and_images_to_a_copy(tmp_path: Any) -> None:
     from growspace_sim.replay.cli import main as replay_main
     from growspace_sim.replay.resim import resimulate
 
-    bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bags',
+    bag = os.path.join(ROOT, 'bags',
                        'oracle_shape_easy.mcap')
     out = tmp_path / 'view.mcap'
     assert replay_main(['export', bag, str(out), '--view', '--view-size', '256']) == 0

@@ -443,7 +443,7 @@ def test_bad_spec_names_the_field_the_value_and_what_is_allowed(change, message)
 
 
 def test_shipped_specs_expand_to_their_trials():
-    root = Path(__file__).resolve().parent.parent / 'config' / 'sweeps'
+    root = Path(__file__).resolve().parents[2] / 'config' / 'sweeps'
     reference = sweep.load_spec(root / 'reference_agents.yaml')
     assert len(reference.trials) == 8 * 5 + 8  # the oracle is deterministic: one seed
     if importlib.util.find_spec('stable_baselines3') is None:

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 spec = importlib.util.spec_from_file_location('fix_ros_wheel_cmake',
                                               ROOT / 'scripts' / 'fix_ros_wheel_cmake.py')
 fix = importlib.util.module_from_spec(spec)

@@ -41,7 +41,7 @@ def test_gcode_into_a_closed_pipe_stops_quietly() -> None:
     import subprocess
     import sys
 
-    bag = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_easy.mcap'
+    bag = Path(__file__).resolve().parents[2] / 'bags' / 'oracle_control_easy.mcap'
     if not bag.exists():
         pytest.skip('no sample bags')
     writer = subprocess.Popen([sys.executable, '-m', 'growspace_gantry.gcode', str(bag)],
@@ -59,7 +59,7 @@ def test_gcode_into_a_closed_pipe_stops_quietly() -> None:
 # folder. The scripts' main() runs in this process with the arguments (what the console
 # script runs); the nodes' parameter values are checked by a node that starts, in a child.
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BAG = ROOT / 'bags' / 'oracle_control_easy.mcap'
 MISSING = '/nonexistent/dir'
 

@@ -13,7 +13,7 @@ from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
 from growspace_sim.node.params import NodeParams, ParamError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 YAML = ROOT / 'config' / 'growspace.yaml'
 
 

@@ -39,7 +39,7 @@ from growspace_sim.replay import Bag, read_episodes, ReplayError, resimulate
 from growspace_sim.ros import qos as ros_qos, types
 from growspace_sim.ros.interface import TOPICS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PYTHONPATH = str(ROOT / 'src' / 'growspace_sim')
 
 

@@ -1,8 +1,8 @@
 """The installed ``gantry_node`` on real rclpy, driving an emulated GRBL 1.1 on a pty.
 
 The bridge's lockstep link drives it like a simulated chamber (no image: the gantry runs without
-a camera here: tests/test_rig_ros.py has one); SIGTERM during a move leaves the lamp off and the
-machine stopped.
+a camera here: tests/gantry/test_rig_ros.py has one); SIGTERM during a move leaves the lamp off
+and the machine stopped.
 """
 
 from __future__ import annotations
@@ -94,7 +94,7 @@ def test_invalid_calibration_exits_2_naming_the_key(grbl: GrblEmulator, tmp_path
     assert grbl.lines == []  # nothing was sent
 
 
-BAG = os.path.join(os.path.dirname(__file__), '..', 'bags', 'oracle_control_hard.mcap')
+BAG = os.path.join(os.path.dirname(__file__), '..', '..', 'bags', 'oracle_control_hard.mcap')
 
 
 def replay_onto_gantry(tmp_path, *params: str, **play: Any) -> Any:

@@ -31,7 +31,7 @@ from growspace_camera.pipeline import Measurement, Pipeline
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import Light
 
-HERE = Path(__file__).resolve().parent / 'data' / 'real_photos'
+HERE = Path(__file__).resolve().parents[1] / 'data' / 'real_photos'
 CFG = SimConfig(challenge='control')  # one plant, a point target
 LIGHT = Light(False, 0.42, 0.84, 0.2, 0.1)  # a 20 cm beam over the plant
 TARGET = Target(0.42 + 0.6j)

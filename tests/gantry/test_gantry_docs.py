@@ -26,7 +26,7 @@ from test_gantry_node import RIG
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / 'README.md', ROOT / 'docs' / 'hardware.md']
 
 

@@ -273,7 +273,7 @@ def test_the_replay_policy_plays_a_recordings_actions_step_by_step(tmp_path):
     from growspace_sim.replay import Bag, read_episodes
     from growspace_sim.rig.runner import Runner
 
-    sample = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_easy.mcap'
+    sample = Path(__file__).resolve().parents[2] / 'bags' / 'oracle_control_easy.mcap'
     with Bag(sample) as bag:
         recorded = read_episodes(bag)[0]
         seed = recorded.seed

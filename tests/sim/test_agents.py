@@ -72,7 +72,7 @@ def test_bench_script_prints_a_table_and_restores_the_cpu_set(capsys):
 @pytest.mark.slow
 def test_the_readme_evaluation_table_reproduces_exactly(capsys):
     # The README's table is `growspace-eval --episodes 100`, printed by the one evaluation stack.
-    readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
+    readme = (Path(__file__).resolve().parents[2] / 'README.md').read_text()
     assert evaluate.main(['--episodes', '100']) == 0
     table = capsys.readouterr().out.split('\n\n', 1)[1].strip()
     assert table in readme

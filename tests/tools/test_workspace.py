@@ -13,7 +13,7 @@ from rosbags.typesys import get_types_from_msg
 
 from growspace_sim.ros import types
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXPECTED_PACKAGES = {
     'growspace_msgs': 'ros.ament_cmake',
     'growspace_sim': 'ros.ament_python',

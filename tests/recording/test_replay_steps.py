@@ -19,7 +19,7 @@ from ros_helpers import NodeProcess
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
 
-BAG = Path(__file__).resolve().parents[1] / 'bags' / 'oracle_control_hard.mcap'
+BAG = Path(__file__).resolve().parents[2] / 'bags' / 'oracle_control_hard.mcap'
 
 
 def lights(path: Path, namespace: str = '/growspace') -> dict[int, tuple[float, float]]:

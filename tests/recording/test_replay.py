@@ -22,7 +22,7 @@ from growspace_sim.recording import McapRecorder
 from growspace_sim.replay import Bag, ReplayError
 from growspace_sim.ros import qos as ros_qos, types
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PYTHONPATH = str(ROOT / 'src' / 'growspace_sim')
 BAGS = ROOT / 'bags'
 

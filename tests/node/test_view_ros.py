@@ -28,6 +28,8 @@ from growspace_sim.view import markers
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
 
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
 
 # ----------------------------------------------------------------------------- over ROS
 NAMESPACE = f'/gs_view_{secrets.token_hex(3)}'
@@ -145,7 +147,7 @@ def test_view_node_shows_a_replayed_bag_with_its_photons() -> None:
 
     from growspace_sim.replay.play import play
 
-    bag = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bags',
+    bag = os.path.join(ROOT, 'bags',
                        'oracle_control_easy.mcap')
     ns = '/growspace'  # the bag's namespace
     view = NodeProcess(namespace=ns, executable=view_node_executable())
