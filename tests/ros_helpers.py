@@ -121,6 +121,20 @@ class Client:
                         and self.reset_pub.get_subscription_count() > 0
                         and self.configs, TIMEOUT_S, 'the node appears and matches ours')
 
+    def reset_until(self, arrived: Callable[[int], bool], first_id: int, what: str,
+                    **fields: Any) -> int:
+        """Resets (ids ``first_id``, +1, ...) until ``arrived(reset_id)``: for a reader made
+        after ``connect()``, its answer reaching it shows the node's writer knows it. Returns
+        the reset id that arrived."""
+        sent = [first_id - 1]
+
+        def reached() -> bool:
+            sent[0] += 1
+            self.reset_pub.publish(ResetRequest(reset_id=sent[0], **fields))
+            return self.spin_until(lambda: arrived(sent[0]), 2.0)
+        self.wait_until(reached, 3 * TIMEOUT_S, what)
+        return sent[0]
+
     def wait_result(self, match: Callable[[StepResult], bool], since: int = 0,
                     timeout: float = TIMEOUT_S) -> StepResult:
         """The first StepResult from ``self.results[since:]`` that ``match`` accepts."""
