@@ -16,7 +16,8 @@ def wait_until(predicate: Callable[[], T], timeout: float, what: str, *,
     """Poll ``predicate`` until it returns something true; returns that value.
 
     Args:
-        predicate: The event's check, cheap and without side effects beyond reading.
+        predicate: The event's check. It may also act, where only a retry shows the event
+            (a request sent again until its answer comes).
         timeout: The deadline [s], generous: it bounds a failing test, not a passing one.
         what: The event, as a sentence: 'the view says where the chambers are'.
         between: Called between two checks (an executor's ``spin_once``, reading a pipe);
