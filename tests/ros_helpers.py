@@ -119,7 +119,7 @@ class Client:
         config reached us: its writers know our readers)."""
         self.wait_until(lambda: self.command.get_subscription_count() > 0
                         and self.reset_pub.get_subscription_count() > 0
-                        and self.configs, TIMEOUT_S, 'the node appears and matches ours')
+                        and self.configs, 3 * TIMEOUT_S, 'the node appears and matches ours')
 
     def reset_until(self, arrived: Callable[[int], bool], first_id: int, what: str,
                     **fields: Any) -> int:
