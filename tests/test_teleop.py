@@ -48,9 +48,10 @@ def test_teleop_says_ready_once_the_node_has_matched_it_both_ways() -> None:
     transport.unread.add(transport.resolve('light/command'))
     teleop = Teleop(transport)
     assert teleop.lines()[3] == 'waiting for the node...'
+    teleop.status = 'teleop: no chamber in /growspace after 5 s'  # the watch, before discovery
     teleop._on_config(types.new('std_msgs/msg/String', data=json.dumps(
         {'mode': 'lockstep', 'config': {'challenge': 'control'}})), b'')
-    assert teleop.lines()[3] == 'waiting for the node...'  # our commands have no reader yet
+    assert teleop.lines()[3].startswith('teleop: no chamber')  # our commands have no reader
     transport.unread.clear()
     assert teleop.lines()[3] == 'ready: the node reads our keys'
     assert teleop.press(curses.KEY_RIGHT) and teleop.lines()[3] == 'sent right (step_id 1)'

@@ -184,7 +184,7 @@ def test_view_node_bad_parameters_exit_2_naming_them(args: tuple, expected: str)
 
     view = NodeProcess(*args, namespace=f'{NAMESPACE}_bad', executable=view_node_executable())
     try:
-        view.proc.wait(timeout=TIMEOUT_S)
+        view.proc.wait(timeout=3 * TIMEOUT_S)  # its start-up on a loaded machine
     finally:
         code, output = view.stop()
     assert code == 2 and expected in output, output[-2000:]

@@ -74,7 +74,8 @@ class Teleop:
         self.last_result: Any = None
         self.spot = False
         self.mode = 'lockstep'
-        self.status = WAITING
+        self.status = WAITING  # or the chamber watch's warning, or what the last key did
+        self.sent = False  # a key has sent a command or a reset
         self.config_seen = False
 
     def _on_result(self, msg: Any, _: bytes) -> None:
@@ -101,6 +102,8 @@ class Teleop:
         command = key_to_command(key, self.spot)
         if command == QUIT:
             return False
+        if command is not None:
+            self.sent = True
         if command == RESET:
             self.send_reset(types.new(types.RESET_REQUEST, reset_id=secrets.randbits(32)))
             self.status = 'reset sent'
@@ -125,8 +128,9 @@ class Teleop:
     def _status(self) -> str:
         # Ready once both ways are matched: the node's latched config reached us (its writers
         # know our readers) and our command writer knows its reader (a key pressed before
-        # would be lost: the node would never see that command).
-        if self.status == WAITING and self.config_seen and \
+        # would be lost: the node would never see that command). Until the first key, this
+        # also replaces a no-chamber warning from before the chamber was found.
+        if not self.sent and self.config_seen and \
                 self.transport.has_subscribers('light/command'):
             return READY
         return self.status
