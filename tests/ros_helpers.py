@@ -17,17 +17,20 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from growspace_msgs.msg import LightCommand, ResetRequest, StepResult
 from sensor_msgs.msg import Image
+from std_msgs.msg import String
 
 from growspace_sim.node.main import installed_executable as sim_node_executable
+from waiting import wait_until
 
 TIMEOUT_S = 20.0
 COMMANDS = QoSProfile(depth=100)
 OBSERVATIONS = QoSProfile(depth=10)
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # chamber/config
 
 
 class NodeProcess:
@@ -74,7 +77,10 @@ class NodeProcess:
 class Client:
     """A lockstep client on rclpy with the generated message classes, in a private context."""
 
-    def __init__(self, namespace: str = '/gs_test', name: str = 'test_client') -> None:
+    def __init__(self, namespace: str = '/gs_test', name: str = 'test_client', *,
+                 observe: bool = True) -> None:
+        """``observe=False``: no subscriptions of its own (a test whose only readers of the
+        chamber's topics must be the ones it makes, as an RViz would)."""
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node(name, namespace=namespace, context=self.context)
@@ -84,10 +90,16 @@ class Client:
         self.reset_pub = self.node.create_publisher(ResetRequest, 'reset', COMMANDS)
         self.results: list[StepResult] = []
         self.images: list[Image] = []
-        self.node.create_subscription(StepResult, 'step_result', self.results.append,
-                                      OBSERVATIONS)
-        self.node.create_subscription(Image, 'camera/image_raw', self.images.append,
-                                      OBSERVATIONS)
+        self.configs: list[String] = []
+        if observe:
+            self.node.create_subscription(StepResult, 'step_result', self.results.append,
+                                          OBSERVATIONS)
+            self.node.create_subscription(Image, 'camera/image_raw', self.images.append,
+                                          OBSERVATIONS)
+            # Last: our endpoints reach the node in the order they were made, so its latched
+            # config arriving here shows it has matched the subscriptions above as well.
+            self.node.create_subscription(String, 'chamber/config', self.configs.append,
+                                          LATCHED)
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float = TIMEOUT_S) -> bool:
         deadline = time.monotonic() + timeout
@@ -97,13 +109,31 @@ class Client:
             self.executor.spin_once(timeout_sec=0.05)
         return True
 
+    def wait_until(self, predicate: Callable[[], Any], timeout: float, what: str) -> Any:
+        """``waiting.wait_until`` spinning this client between checks."""
+        return wait_until(predicate, timeout, what,
+                          between=lambda: self.executor.spin_once(timeout_sec=0.05))
+
     def connect(self) -> None:
-        assert self.spin_until(lambda: self.command.get_subscription_count() > 0
-                               and self.reset_pub.get_subscription_count() > 0
-                               and self.node.count_publishers(
-                                   self.node.resolve_topic_name('step_result')) > 0), \
-            'the node did not appear'
-        self.drain(0.3)  # let the node match our subscriptions too
+        """Until our endpoints and the node's have matched both ways (the node's latched
+        config reached us: its writers know our readers)."""
+        self.wait_until(lambda: self.command.get_subscription_count() > 0
+                        and self.reset_pub.get_subscription_count() > 0
+                        and self.configs, 3 * TIMEOUT_S, 'the node appears and matches ours')
+
+    def reset_until(self, arrived: Callable[[int], bool], first_id: int, what: str,
+                    **fields: Any) -> int:
+        """Resets (ids ``first_id``, +1, ...) until ``arrived(reset_id)``: for a reader made
+        after ``connect()``, its answer reaching it shows the node's writer knows it. Returns
+        the reset id that arrived."""
+        sent = [first_id - 1]
+
+        def reached() -> bool:
+            sent[0] += 1
+            self.reset_pub.publish(ResetRequest(reset_id=sent[0], **fields))
+            return self.spin_until(lambda: arrived(sent[0]), 2.0)
+        self.wait_until(reached, 3 * TIMEOUT_S, what)
+        return sent[0]
 
     def wait_result(self, match: Callable[[StepResult], bool], since: int = 0,
                     timeout: float = TIMEOUT_S) -> StepResult:

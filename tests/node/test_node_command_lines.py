@@ -15,6 +15,7 @@ import pytest
 
 from conftest import child_env
 from ros_helpers import NodeProcess
+from waiting import wait_until
 
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
@@ -48,17 +49,17 @@ def test_help_says_how_to_pass_ros_arguments(name: str) -> None:
 
 def test_a_view_beside_no_chamber_says_where_the_chambers_are() -> None:
     chamber = NodeProcess('-p', 'seed:=1', namespace=None)  # the default namespace
-    view = subprocess.Popen([executable('view_node'), '--ros-args', '-r', '__ns:=/elsewhere'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=child_env())
+    view = NodeProcess(namespace='/elsewhere', executable=executable('view_node'))
+    said = 'view_node: no chamber in /elsewhere after 5 s; chambers are in /growspace'
     try:
-        time.sleep(9.0)  # presence.AFTER_S (5 s) plus start-up on a loaded machine
+        # presence.AFTER_S (5 s) after the view started, which a loaded machine delays.
+        wait_until(lambda: said in view.output() or view.proc.poll() is not None, 90.0,
+                   'the view says where the chambers are',
+                   detail=lambda: view.output()[-2000:])
     finally:
-        view.send_signal(signal.SIGINT)
-        out = view.communicate(timeout=30)[0]
+        code, out = view.stop(signal.SIGINT)
         chamber.stop()
-    assert 'view_node: no chamber in /elsewhere after 5 s; chambers are in /growspace' in out, \
-        out[-2000:]
+    assert said in out and code == 0, out[-2000:]
 
 
 def test_the_gantry_takes_the_simulators_params_file_without_crying_typo(tmp_path) -> None:

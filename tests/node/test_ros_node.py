@@ -30,6 +30,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
                                 SetParameters)
 from ros_helpers import TIMEOUT_S, Client, NodeProcess, sim_node_executable
+from waiting import wait_until
 from growspace_sim.core import task as tasks
 import growspace_sim.envs.registration  # noqa: F401 - registers the GrowSpace ids
 
@@ -202,7 +203,7 @@ def test_every_step_answered_exactly_once_across_resets(fresh: Client) -> None:
                                   and m.step_id == j)
         fresh.wait_result(lambda m, r=reset_id, last=ids[-1]: m.reset_id == r
                           and m.step_id == last)
-        fresh.drain(0.2)  # a duplicate answer would arrive now
+        fresh.drain(0.2)  # a deliberate negative check: a duplicate answer would arrive now
         mine = [r for r in fresh.results if r.reset_id == reset_id and r.step_id > 0]
         counts = {i: sum(r.step_id == i for r in mine) for i in ids}
         assert counts == dict.fromkeys(ids, 1), counts
@@ -225,13 +226,17 @@ def test_a_flood_of_commands_is_answered_without_loss(fresh: Client) -> None:
     # commands the node has not acknowledged yet whenever it falls behind.
     sender = fresh.node.create_publisher(LightCommand, 'light/command', rclpy.qos.QoSProfile(
         depth=1, history=rclpy.qos.HistoryPolicy.KEEP_ALL))
-    fresh.drain(0.5)  # the node matches the new reader and writer
+    fresh.wait_until(lambda: sender.get_subscription_count() > 0, TIMEOUT_S,
+                     'the node matches our new writer')
+    fresh.reset_until(lambda rid: any(r.reset_id == rid for r in answers), 140,
+                      'a reset answer reaches our new reader')
     reset_and_wait(fresh, 150, seed=3)
     for i in range(1, flood + 1):
         sender.publish(LightCommand(step_id=i, mode=LightCommand.MODE_DISCRETE, action=i % 5))
-    assert fresh.spin_until(lambda: sum(r.reset_id == 150 and r.step_id > 0
-                                        for r in answers) >= flood, 60.0)
-    fresh.drain(0.2)
+    fresh.wait_until(lambda: sum(r.reset_id == 150 and r.step_id > 0
+                                 for r in answers) >= flood, 240.0,
+                     f'answers to all {flood} commands')  # 60 s ran out beside two burners
+    fresh.drain(0.2)  # a deliberate negative check: an extra answer would arrive now
     ids = sorted(r.step_id for r in answers if r.reset_id == 150 and r.step_id > 0)
     assert ids == list(range(1, flood + 1))
     fresh.node.destroy_publisher(sender)
@@ -444,7 +449,12 @@ def test_realtime_rate_changes_live_and_the_timer_follows() -> None:
         result = set_param(client, 'rate_hz', ParameterValue(
             type=ParameterType.PARAMETER_DOUBLE, double_value=80.0), node)
         assert result.successful, result.reason
-        client.drain(0.2)
+
+        def at_new_rate() -> bool:  # the last two results are 1/80 s apart in sim time
+            stamps = [r.header.stamp.sec * 10**9 + r.header.stamp.nanosec
+                      for r in client.results[-2:]]
+            return len(stamps) == 2 and stamps[1] - stamps[0] == 12_500_000
+        client.wait_until(at_new_rate, TIMEOUT_S, 'steps at the new rate')
         client.results.clear()
         start = time.monotonic()
         client.drain(2.0)
@@ -494,7 +504,8 @@ def remapped_client(remapped: tuple[NodeProcess, str]) -> Iterator[Client]:
                             c.node.get_node_names_and_namespaces()), 'node did not appear'
         assert c.spin_until(lambda: c.command.get_subscription_count() > 0
                             and c.node.count_publishers(f'{ns}/results') > 0)
-        c.drain(0.3)
+        c.reset_until(lambda rid: any(r.reset_id == rid for r in results), 1000,
+                      'a reset answer on the remapped topic')
         yield c
     finally:
         c.close()
@@ -608,24 +619,26 @@ def test_recording_is_finished_by_a_signal_and_resimulates(tmp_path: Any, sig: i
 
 
 # ----------------------------------------------------------------------------- 11. signals
-# Delays within rclpy's and the node's start-up, counted from the moment our module is loaded:
-# a signal before the interpreter has run it gets the default action (and no file exists yet).
-# The import time is measured on the machine as loaded as it is now, not assumed.
-@pytest.fixture(scope='module')
-def import_s() -> float:
-    start = time.perf_counter()
-    subprocess.run([sys.executable, '-c', 'import growspace_sim.node.main'], check=True,
-                   timeout=TIMEOUT_S)
-    return time.perf_counter() - start
+# A signal before the node's handlers are in place gets the default action (and no file exists
+# yet): the tests wait for that event, read from /proc, not for a guessed import time.
+def catches(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for ``sig`` now (SigCgt, proc(5))."""
+    with open(f'/proc/{pid}/status') as f:
+        caught = next(line for line in f if line.startswith('SigCgt:'))
+    return bool(int(caught.split()[1], 16) >> (sig - 1) & 1)
 
 
 @pytest.mark.parametrize('delay_s', [0.1, 0.6])
-def test_sigterm_during_start_up_exits_cleanly(delay_s: float, import_s: float) -> None:
+def test_sigterm_during_start_up_exits_cleanly(delay_s: float) -> None:
     proc = subprocess.Popen([sim_node_executable(), '--ros-args', '-r',
                              f'__ns:={NAMESPACE}_early'],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(1.5 * import_s + delay_s)
+        wait_until(lambda: proc.poll() is not None or catches(proc.pid, signal.SIGTERM),
+                   TIMEOUT_S * 3, 'sim_node handles SIGTERM')
+        # Deliberately this long after: within rclpy's and the node's start-up (a second or
+        # more), which is the case tested; nothing is assumed to have happened by then.
+        time.sleep(delay_s)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=TIMEOUT_S)
     finally:
@@ -719,7 +732,10 @@ def test_closing_that_hangs_is_bounded(second: int | None) -> None:
         proc.send_signal(signal.SIGINT)
         start = time.monotonic()
         if second is not None:
-            time.sleep(0.5)  # closing has begun and hangs
+            # The first signal was handled (the node put the default action back for the
+            # next): closing has begun, and hangs.
+            wait_until(lambda: not catches(proc.pid, second), TIMEOUT_S,
+                       'the node handles the first signal')
             proc.send_signal(second)
         proc.wait(timeout=10.0)  # never, before: spinning in destroy_node, deaf to SIGTERM
         took = time.monotonic() - start

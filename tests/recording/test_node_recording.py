@@ -44,7 +44,7 @@ def test_recording_of_a_lockstep_session_resimulates_and_matches_the_client(
         for step_id in range(1, EPISODE + 1):
             answered.append(client.step(step_id, step_id % 7))
         before = len(client.results)
-        client.drain(0.3)
+        client.drain(0.3)  # a deliberate negative check: a late extra answer would come now
         late = client.results[before:]
         client.close()
     finally:

@@ -237,7 +237,6 @@ def test_sigterm_mid_episode_finishes_the_file(tmp_path):
                                  '--rate-hz', '100'), env=_env(), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     _wait_for_size(path, 40_000, proc)  # past the first chunk flush: mid-run
-    time.sleep(0.3)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
@@ -255,7 +254,7 @@ def test_sigkill_leaves_complete_chunks_recoverable(tmp_path):
                                  '--rate-hz', '100'), env=_env(), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     _wait_for_size(path, 40_000, proc)
-    time.sleep(0.5)
+    _wait_for_size(path, path.stat().st_size + 1, proc)  # and a later chunk: killed mid-run
     proc.kill()
     proc.communicate(timeout=30)
     with pytest.raises(ReplayError, match='growspace-replay recover'):

@@ -14,11 +14,11 @@ import re
 import shlex
 import shutil
 import subprocess
-import time
 
 import pytest
 
 from conftest import child_env
+from waiting import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]
@@ -167,22 +167,25 @@ def test_the_launch_files_nodes_by_hand_meet_and_answer_the_pub_lines(tmp_path) 
                                cwd=ROOT, env=child_env(), start_new_session=True,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        time.sleep(3.0)
+        # Until both chambers and the view are on the graph (started: no signal lands in their
+        # imports), then the pub lines, which wait for their readers themselves.
+        probe = ('from growspace_sim.node.rclpy_transport import RclpyTransport\n'
+                 'import time\n'
+                 't = RclpyTransport("readme_probe")\n'
+                 'view = ("growspace_view", "/chamber1")\n'
+                 'end = time.monotonic() + 90\n'
+                 'while (len(t.chamber_namespaces()) < 2 or view not in\n'
+                 '       t.node.get_node_names_and_namespaces()) and time.monotonic() < end:\n'
+                 '    t.spin_once(0.1)\n'
+                 'print(t.chamber_namespaces(), view in t.node.get_node_names_and_namespaces())\n'
+                 't.close()\n')
+        (tmp_path / 'probe.py').write_text(probe)
+        seen = shell(f'python {tmp_path / "probe.py"}', timeout=120)
+        assert "['/chamber1', '/growspace'] True" in seen.stdout, seen.stdout + seen.stderr
         for line in pubs:  # the first step of the node's first episode, then a reset
             out = shell(line, timeout=120)
             assert out.returncode == 0 and 'published on /growspace/' in out.stdout, out.stderr
             assert 'no subscriber' not in out.stderr, out.stderr
-        probe = ('from growspace_sim.node.rclpy_transport import RclpyTransport\n'
-                 'import time\n'
-                 't = RclpyTransport("readme_probe")\n'
-                 'end = time.monotonic() + 20\n'
-                 'while len(t.chamber_namespaces()) < 2 and time.monotonic() < end:\n'
-                 '    t.spin_once(0.1)\n'
-                 'print(t.chamber_namespaces())\n'
-                 't.close()\n')
-        (tmp_path / 'probe.py').write_text(probe)
-        seen = shell(f'python {tmp_path / "probe.py"}', timeout=120)
-        assert "['/chamber1', '/growspace']" in seen.stdout, seen.stdout + seen.stderr
     finally:
         os.killpg(started.pid, 2)
         log = started.communicate(timeout=60)[0]
@@ -204,7 +207,7 @@ def test_no_page_names_a_script_or_file_that_is_not_here(page: Path) -> None:
 @pytest.mark.slow
 def test_the_camera_lines_run_as_written(tmp_path) -> None:
     # In page order: the sheet, twin photos into shots/, measuring them, then camera_node on the
-    # twin and on those photos (started, up for a few seconds, stopped by SIGINT).
+    # twin and on those photos (started until its source is open, then stopped by SIGINT).
     lines = [line for _, line in documented() if how(line) == RUN and (
         line.startswith('growspace-camera ') or line.startswith('camera_node '))]
     tools = [line for line in lines if line.startswith('growspace-camera ')]
@@ -214,13 +217,23 @@ def test_the_camera_lines_run_as_written(tmp_path) -> None:
         out = shell(line, cwd=tmp_path)
         assert out.returncode == 0, (line, out.stdout[-2000:], out.stderr[-2000:])
     assert (tmp_path / 'sheet.svg').is_file() and list((tmp_path / 'shots').glob('*.jpg'))
-    for line in nodes:
-        node = subprocess.Popen(['bash', '-c', f'eval "$(./run.sh env)" && cd {tmp_path} && '
-                                               f'exec {line}'],
-                                cwd=ROOT, env=child_env(), stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True)
-        time.sleep(6.0)
-        alive = node.poll() is None
-        node.send_signal(2)
-        log = node.communicate(timeout=60)[0]
+    for i, line in enumerate(nodes):
+        path = tmp_path / f'camera_node_{i}.log'
+        with open(path, 'w') as out:
+            node = subprocess.Popen(['bash', '-c', f'eval "$(./run.sh env)" && cd {tmp_path} && '
+                                                   f'exec {line}'],
+                                    cwd=ROOT, env=child_env(), stdout=out,
+                                    stderr=subprocess.STDOUT, text=True)
+        try:
+            wait_until(lambda p=path, n=node: re.search(r'camera: .* open: ', p.read_text())
+                       or n.poll() is not None, 120.0, f'{line}: its source opens',
+                       detail=lambda p=path: p.read_text()[-3000:])
+            alive = node.poll() is None
+            node.send_signal(2)
+            node.wait(timeout=60)
+        finally:
+            if node.poll() is None:
+                node.kill()
+                node.wait()
+        log = path.read_text()
         assert alive and node.returncode == 0 and 'Traceback' not in log, (line, log[-3000:])

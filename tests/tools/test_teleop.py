@@ -46,6 +46,20 @@ def test_special_and_unknown_keys() -> None:
     assert key_to_command(-1, False) is None
 
 
+def test_teleop_says_ready_once_the_node_has_matched_it_both_ways() -> None:
+    transport = FakeTransport()
+    transport.unread.add(transport.resolve('light/command'))
+    teleop = Teleop(transport)
+    assert teleop.lines()[3] == 'waiting for the node...'
+    teleop.status = 'teleop: no chamber in /growspace after 5 s'  # the watch, before discovery
+    teleop._on_config(types.new('std_msgs/msg/String', data=json.dumps(
+        {'mode': 'lockstep', 'config': {'challenge': 'control'}})), b'')
+    assert teleop.lines()[3].startswith('teleop: no chamber')  # our commands have no reader
+    transport.unread.clear()
+    assert teleop.lines()[3] == 'ready: the node reads our keys'
+    assert teleop.press(curses.KEY_RIGHT) and teleop.lines()[3] == 'sent right (step_id 1)'
+
+
 def test_teleop_follows_step_ids_mode_and_light_kind() -> None:
     transport = FakeTransport()
     ChamberNode(transport, SimConfig(), NodeParams(seed=1))  # subscribes to the transport
@@ -119,9 +133,9 @@ def test_teleop_in_a_terminal_drives_the_node() -> None:
         observer = Client(namespace, 'observer')
         try:
             observer.connect()
-            screen = _read_until(fd, b'GrowSpace teleop', 20.0)
-            assert b'GrowSpace teleop' in screen, screen
-            time.sleep(1.0)  # let teleop's endpoints match the node's
+            # Teleop says when it and the node have matched both ways: a key before is lost.
+            screen = _read_until(fd, b'ready: the node reads our keys', 60.0)
+            assert b'ready: the node reads our keys' in screen, screen
             for expected in (1, 2):
                 # Right arrow as xterm sends it in keypad (application) mode, which curses sets.
                 os.write(fd, b'\x1bOC')

@@ -268,6 +268,16 @@ class RclpyTransport:
                       if name.endswith(suffix) and types.STRING in kinds
                       and self.node.count_publishers(name) > 0)
 
+    def readers(self, topic: str) -> tuple[int, int]:
+        """Readers of ``topic``: (on the ROS graph, matched to our publisher of it).
+
+        The two are discovered apart: the graph may show a reader our writer has not matched
+        yet (it would miss what we publish now), or the other way round.
+        """
+        pub = self._publishers.get(self.resolve(topic))
+        matched = 0 if pub is None else pub.get_subscription_count()
+        return self.node.count_subscribers(self.resolve(topic)), matched
+
     def matched(self, topic: str) -> bool:
         endpoint = self._publishers.get(self.resolve(topic))
         if endpoint is not None:

@@ -14,7 +14,7 @@ from growspace_sim.replay.bag import ReplayError
 from growspace_sim.replay.compare import compare, format_comparison
 from growspace_sim.replay.episodes import format_summary, summary
 from growspace_sim.replay.export import export_episode, FPS_RANGE, SCALE_RANGE
-from growspace_sim.replay.play import play, play_steps
+from growspace_sim.replay.play import play, PLAY_WAIT_S, play_steps
 from growspace_sim.replay.resim import resimulate
 
 
@@ -71,8 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
                              '(not with --step-period: it sends resets and commands)')
     p_play.add_argument('--domain-id', type=arguments.DOMAIN_ID, help='default: ROS_DOMAIN_ID')
     p_play.add_argument('--wait', type=arguments.number(0),
-                        help='seconds to wait for subscribers first (default 1; 10 with '
-                             '--step-period)')
+                        help='seconds to wait for subscribers first (default 10; play goes on '
+                             'once the readers matched)')
     steps = p_play.add_argument_group('step by step (--step-period)')
     steps.add_argument('--episode', type=int, help='only this episode (0-based, -1 = last)')
     steps.add_argument('--start-step', type=arguments.integer(1), default=1, metavar='STEP_ID',
@@ -224,7 +224,7 @@ def _play(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         if not stepwise:
             n = play(args.bag, rate=None if args.fast else args.rate, topics=args.topics,
                      domain_id=args.domain_id, log=say,
-                     wait_for_subscribers_s=1.0 if args.wait is None else args.wait)
+                     wait_for_subscribers_s=PLAY_WAIT_S if args.wait is None else args.wait)
             print(f'published {n} messages')
             return 0
         report = play_steps(args.bag, episode=args.episode, start_step=args.start_step,

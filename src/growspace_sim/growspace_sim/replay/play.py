@@ -20,10 +20,13 @@ from growspace_sim.ros.interface import COMMAND_QOS, OBSERVATION_QOS
 WAITING_NOTE_S = 60.0  # while a step takes longer than this, say so this often [s]
 NODE_GONE_S = 5.0  # no publisher of step_result for this long: the node left [s]
 MATCH_SETTLE_S = 0.5  # after the node's endpoints match ours, before the first request [s]
+# How long ``play`` waits for its readers by default: discovering a running view_node took
+# more than 1 s on this loaded 2-core VM, and whatever is published before is lost to it [s].
+PLAY_WAIT_S = 10.0
 
 
 def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[str] | None = None,
-         domain_id: int | None = None, wait_for_subscribers_s: float = 0.0,
+         domain_id: int | None = None, wait_for_subscribers_s: float = PLAY_WAIT_S,
          log: Callable[[str], None] | None = None) -> int:
     """Republish a recording on its topics over rclpy (``ros2 bag play`` without rosbag2).
 
@@ -36,8 +39,9 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
             as possible.
         topics: Only these recorded topic names; None = all.
         domain_id: ROS domain; None = ROS_DOMAIN_ID.
-        wait_for_subscribers_s: Before playing, wait up to this long for every publisher to
-            match a subscriber.
+        wait_for_subscribers_s: Before playing, wait up to this long until a reader matched
+            and every reader the ROS graph shows on the played topics matched (topics nobody
+            reads are not waited for); then play, matched or not. 0 = play at once.
         log: Where progress lines go (None = quiet).
 
     Returns:
@@ -63,9 +67,7 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
             publishers = {t: transport.raw_publisher(bag.topics[t].typename, t,
                                                      bag.topics[t].qos)
                           for t in sorted(wanted)}
-            deadline = time.monotonic() + wait_for_subscribers_s
-            while time.monotonic() < deadline and not all(map(transport.matched, publishers)):
-                transport.spin_once(0.02)
+            _wait_for_readers(transport, sorted(publishers), wait_for_subscribers_s, log)
             start_wall = time.monotonic()
             first_log: int | None = None
             for msg in bag.messages(wanted):
@@ -83,6 +85,31 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
         finally:
             transport.close()
     return count
+
+
+def _wait_for_readers(transport: Any, topics: list[str], timeout_s: float,
+                      log: Callable[[str], None] | None) -> None:
+    """Until a reader matched and every reader the graph shows on ``topics`` matched, then
+    ``MATCH_SETTLE_S`` more (each side sees a match on its own: a reader that does not know our
+    writer yet drops what it sends); at most ``timeout_s``, then on regardless."""
+    deadline = time.monotonic() + timeout_s
+    while timeout_s > 0:
+        counts = [transport.readers(t) for t in topics]
+        if any(matched for _, matched in counts) and all(
+                matched >= on_graph for on_graph, matched in counts):
+            settle = time.monotonic() + MATCH_SETTLE_S
+            while time.monotonic() < settle:
+                transport.spin_once(0.05)
+            return
+        if time.monotonic() > deadline:
+            unmatched = [t for t, (on_graph, matched) in zip(topics, counts)
+                         if matched < on_graph]
+            if log is not None:
+                log(f'warning: within {timeout_s:g} s (--wait) ' + (
+                    f'readers of {", ".join(unmatched)} did not match' if unmatched
+                    else 'no reader matched') + '; playing anyway')
+            return
+        transport.spin_once(0.05)
 
 
 @dataclasses.dataclass

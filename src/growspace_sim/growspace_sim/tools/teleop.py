@@ -54,6 +54,10 @@ def key_to_command(key: int | str, spot: bool) -> int | str | None:
     return actions.index(name) if name in actions else None
 
 
+WAITING = 'waiting for the node...'
+READY = 'ready: the node reads our keys'
+
+
 class Teleop:
     """The state of a teleop session, independent of the screen (tested without curses)."""
 
@@ -70,7 +74,8 @@ class Teleop:
         self.last_result: Any = None
         self.spot = False
         self.mode = 'lockstep'
-        self.status = 'waiting for the node...'
+        self.status = WAITING  # or the chamber watch's warning, or what the last key did
+        self.sent = False  # a key has sent a command or a reset
         self.config_seen = False
 
     def _on_result(self, msg: Any, _: bytes) -> None:
@@ -97,6 +102,8 @@ class Teleop:
         command = key_to_command(key, self.spot)
         if command == QUIT:
             return False
+        if command is not None:
+            self.sent = True
         if command == RESET:
             self.send_reset(types.new(types.RESET_REQUEST, reset_id=secrets.randbits(32)))
             self.status = 'reset sent'
@@ -116,7 +123,17 @@ class Teleop:
                       f'{result.reward:.4f}  truncated {result.truncated}  {result.info}')
         light = 'spotlight' if self.spot else 'beam'
         return [f'GrowSpace teleop: {self.transport.resolve("light/command")} '
-                f'({self.mode}, {light})', HELP, shown, self.status]
+                f'({self.mode}, {light})', HELP, shown, self._status()]
+
+    def _status(self) -> str:
+        # Ready once both ways are matched: the node's latched config reached us (its writers
+        # know our readers) and our command writer knows its reader (a key pressed before
+        # would be lost: the node would never see that command). Until the first key, this
+        # also replaces a no-chamber warning from before the chamber was found.
+        if not self.sent and self.config_seen and \
+                self.transport.has_subscribers('light/command'):
+            return READY
+        return self.status
 
 
 def _loop(screen: Any, teleop: Teleop) -> None:
