@@ -180,8 +180,9 @@ class GantryNode:
                 self._result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
                 return
         relative = int(msg.mode) in (convert.MODE_DISCRETE, convert.MODE_CONTINUOUS)
-        # Resumed, the position not yet re-established: from the recorded light, absolutely.
-        recorded = relative and self._from_recorded_light and not self.safety.position_known
+        # The first action after a resume: from the recorded light, absolutely (even once
+        # homed: the episode's light is where its last step left it, not where homing did).
+        recorded = relative and self._from_recorded_light
         reason = self.safety.refusal(relative and not recorded)
         if reason:
             self._refused('command:refused', f'light/command: not sent: {reason}',

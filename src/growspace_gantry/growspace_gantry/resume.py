@@ -10,8 +10,14 @@ What the node then does (``node.py``): it keeps the episode's ``reset_id`` and s
 resumed ``growspace-rig`` run attached to it gets its answers; nothing moves at start-up. The
 machine position is not established after a restart (rule 1d of ``safety.py``), so the first
 relative action is applied to the recorded light and sent as an ABSOLUTE move (safe to repeat:
-the design's "place the light again"), which re-establishes the position once reached. Where
-GRBL is in alarm, that command is refused like any other until a person unlocks or homes it.
+the design's "place the light again"), which re-establishes the position once reached; also
+after a person homed the machine (homing puts the light elsewhere than the episode left it).
+Where GRBL is in alarm, that command is refused like any other until a person unlocks or homes
+it (``growspace-rig`` then prints WAITING FOR A PERSON and retries).
+
+Not covered: a position lost mid-episode WITHOUT a restart (an unplug, an alarm) and then
+re-established by homing: the next relative action starts from where homing left the machine
+(rule 1d), not from the episode's last light.
 
 Why the step in progress is never lost nor done twice: ``record.py`` writes each step's answer
 to the recording and pushes it to the OS before it is published, so a step the runner saw
