@@ -161,13 +161,13 @@ def _mount_tmpfs(path: Path) -> None:
 def _fill(path: Path) -> Path:
     """Fill the file system of ``path`` to ENOSPC; returns the ballast file."""
     ballast = path / 'ballast'
-    with open(ballast, 'wb') as stream:
-        try:
-            while True:
-                stream.write(b'\0' * 65536)
-                stream.flush()
-        except OSError:
-            pass
+    with open(ballast, 'wb', buffering=0) as stream:
+        for size in (65536, 4096, 256, 16, 1):  # to the last byte the file system gives
+            try:
+                while stream.write(b'\0' * size):
+                    pass
+            except OSError:
+                pass
     return ballast
 
 
