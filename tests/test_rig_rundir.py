@@ -304,4 +304,4 @@ def test_the_runners_photoperiod_holds_a_step_until_lights_on_and_is_checked_whe
     assert hold_for(RunSettings().photoperiod) is None  # no night: nothing held
     with pytest.raises(RunDirError) as error:
         RunSettings(lights_on='06:00')
-    assert error.value.field == 'lights_on' and "give both" in str(error.value)
+    assert error.value.field == 'lights_on' and 'give both' in str(error.value)
