@@ -64,3 +64,27 @@ def test_without_resume_a_relative_action_after_start_up_is_refused(tmp_path) ->
 def test_a_resume_path_that_does_not_exist_is_named(tmp_path) -> None:
     with pytest.raises(ResumeError, match=r"resume_path = '.*nothing' does not exist"):
         load(str(tmp_path / 'nothing'))
+
+
+def test_the_redo_of_a_failed_step_moves_from_where_the_last_answered_step_left_the_light(
+        tmp_path) -> None:
+    """A step that failed after its move (here superseded in its growth period, as when a
+    resumed runner redoes it) is redone with the same action: the light goes where that
+    action takes it from the last answered step, not one action further."""
+    from test_gantry_growth import step_phase
+    from test_gantry_safety import place
+
+    rig = Rig(tmp_path, growth_s=60.0, watchdog_s=0.0)
+    try:
+        rig.ready()
+        place(rig)
+        rig.transport.inject('light/command', _action(1, 1))
+        assert rig.run_until(lambda: step_phase(rig) == 'growing')  # moved, then failed:
+        once = rig.node.sim.chamber.light.x
+        rig.transport.inject('light/command', _action(2, 1))  # the redo supersedes it
+        assert rig.run_until(lambda: any(r.step_id == 1 for r in rig.results()))
+        assert 'superseded' in next(r for r in rig.results() if r.step_id == 1).info
+        assert rig.node.sim.chamber.light.x == pytest.approx(once)
+        assert rig.run_until(lambda: step_phase(rig) == 'growing' and rig.controller.reached())
+    finally:
+        rig.close()

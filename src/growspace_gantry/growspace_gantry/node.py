@@ -1,7 +1,6 @@
 """The gantry node's logic over the simulator's ``Transport``: topics in, moves out, safety.
 
-Same topics and messages as ``sim_node`` (``growspace_sim.ros.interface``), relative to the
-chamber namespace:
+Same topics and messages as ``sim_node`` (``growspace_sim.ros.interface``), in its namespace:
 
 - in ``light/command`` (growspace_msgs/LightCommand): every mode; actions move the light by the
   simulator's own rules
@@ -10,14 +9,13 @@ chamber namespace:
 - in ``gantry/estop`` (std_msgs/Empty topic and std_srvs/Trigger service): feed hold, lamp off,
   soft reset
 - in ``gantry/unlock``, ``gantry/home`` (std_srvs/Trigger): a person's ``$X`` / ``$H``
+- with ``resume_path``: the last episode of its recording goes on (``resume.py``)
 - out ``chamber/config`` (std_msgs/String, latched JSON): the simulator's keys, and
   ``target``, the episode's target exactly as the camera is sent it (``target_payload``), so a
   recording holds it and never needs the layout run again
-- out ``light/state`` (growspace_msgs/LightCommand): the light the controller REPORTS reaching
-- out ``step_result`` (growspace_msgs/StepResult): once per reset and lockstep command, when the
-  move is done
-- out ``gantry/status`` (diagnostic_msgs/DiagnosticArray): state, position, alarm, buffer, link
-  (1 Hz and on change)
+- out ``light/state`` (LightCommand): the light the controller REPORTS reaching
+- out ``step_result`` (StepResult): once per reset and lockstep command, when it is done
+- out ``gantry/status`` (DiagnosticArray): state, position, alarm, buffer, link (1 Hz, on change)
 - with ``growth_s`` (lockstep): a step's growth period, lamp on at the target, between its move
   and its photo (``growth.py``); the lamp follows the photoperiod (``lights_on``/``lights_off``)
 - with ``camera`` (lockstep): calls camera_node's ``camera/capture`` after each reached move and
@@ -50,7 +48,7 @@ from growspace_gantry.controller import GrblController, Log
 from growspace_gantry.growth import StepTime
 from growspace_gantry.photo import capture_request, outputs, Photographer, Shot
 from growspace_gantry.record import NodeRecording
-from growspace_gantry.resume import GantryResume
+from growspace_gantry.resume import GantryResume, StepBase
 from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
 from growspace_gantry.status import diagnostics, DIAGNOSTICS
@@ -152,7 +150,7 @@ class GantryNode:
             self.safety.home(), 'homing ($H) sent'))
         transport.create_timer(POLL_S, self.poll)
         seed = params.seed if params.seed >= 0 else secrets.randbits(63)
-        self._from_recorded_light = False  # resumed: the next relative action is absolute
+        self.base = StepBase()  # where a resumed or redone step's action starts
         if resume is not None:
             seed = self._resume(resume)
         self._start_recording(seed)
@@ -160,7 +158,7 @@ class GantryNode:
         if resume is not None and resume.light is not None:
             x, z, width, radius = resume.light
             self.sim.place_light(x=x, z=z, width=width, radius=radius)
-            self._from_recorded_light = True
+            self.base.resume(resume.light)
         self._publish_config(seed)
         # The machine does not move at start-up: the first command or reset moves it.
 
@@ -180,21 +178,26 @@ class GantryNode:
                 self._result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
                 return
         relative = int(msg.mode) in (convert.MODE_DISCRETE, convert.MODE_CONTINUOUS)
-        # The first action after a resume: from the recorded light, absolutely (even once
-        # homed: the episode's light is where its last step left it, not where homing did).
-        recorded = relative and self._from_recorded_light
+        # The first action after a resume, or the redo of a failed step: from the light the
+        # last answered step reached, absolutely (not from where a failed move or homing left
+        # it); after a resume even before the position is re-established (resume.py).
+        recorded = relative and self.base.bypass
         reason = self.safety.refusal(relative and not recorded)
         if reason:
             self._refused('command:refused', f'light/command: not sent: {reason}',
                           step_id if lockstep else None, f'error: gantry not ready: {reason}')
             return
+        if lockstep and (self.pending or self.step_time.busy or self.photo and self.photo.busy):
+            self._fail_pending(f'superseded by a newer command (step_id {step_id})')  # redone
         light = self.sim.chamber.light
         before = light.copy()
         try:
-            if relative and not recorded:  # from the light the machine reached, never a target
+            base = self.base.base if relative else None
+            if relative:  # from the light the machine reached, never from a target
                 reached = self.cal.to_light(self.controller.position, light)
-                self.sim.place_light(x=reached.x, z=reached.z, width=reached.width,
-                                     radius=reached.radius)
+                x, z, width, radius = base or (reached.x, reached.z, reached.width,
+                                               reached.radius)
+                self.sim.place_light(x=x, z=z, width=width, radius=radius)
             convert.apply_command(self.sim, msg)
             target = self.cal.to_machine(self.sim.chamber.light)
         except (CommandError, TargetError) as e:
@@ -205,7 +208,7 @@ class GantryNode:
                           f'light/command: not sent to the machine: {e}',
                           step_id if lockstep else None, f'error: {e}')
             return
-        self._from_recorded_light = False
+        self.base.take()
         self._move(target, step_id if lockstep else None, placing=not relative or recorded)
 
     def on_reset(self, msg: Any, cdr: bytes) -> None:
@@ -323,6 +326,8 @@ class GantryNode:
         else:
             return
         self.pending = None
+        if step_id:
+            self.base.failed()
         self.log.warn('move', f'gantry: step_id {step_id} failed: {reason}')
         self._result(step_id, reset_id, info=f'error: {reason}')
 
@@ -340,6 +345,7 @@ class GantryNode:
             self.photo.start(reset_id, step_id, stamp, light, request, self.clock())
             return
         self._publish('light', light)
+        self.base.answered_at(light)
         self.steps += bool(step_id)
         truncated = self.steps >= self.cfg.episode_length
         self._result(step_id, reset_id, stamp=stamp, truncated=truncated)
@@ -351,6 +357,7 @@ class GantryNode:
         for key, msg in messages:
             self._publish(key, msg)
         self.steps += bool(shot.step_id) and not failure
+        self.base.failed() if failure and shot.step_id else self.base.answered_at(shot.light)
         truncated = self.steps >= self.cfg.episode_length
         if failure:
             self.log.warn('camera:step', f'gantry: step_id {shot.step_id}: no measurement '

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from typing import Any
 
 from growspace_sim.core.config import SimConfig
 
@@ -96,3 +97,45 @@ def load(path: str) -> GantryResume | None:
     return GantryResume(last.config, int(last.seed), last.reset_id,
                         max(int(r.step_id) for r in results),
                         max(int(r.step) for r in results), light, last.done)
+
+
+Light = tuple[float, float, float, float]  # x, z, width, radius [m]
+
+
+class StepBase:
+    """The light a lockstep step's relative action applies to, where not the reached one.
+
+    The agent's action ``a_t`` moves the light from where step ``t-1`` left it. Two cases
+    where the machine is not there, and the action is applied to that light instead (the
+    target then sent as an absolute move, safe to repeat):
+
+    - resumed (``resume``): the light the recording's last step reached; the node also lets
+      this one action through while the position is not established (``bypass``);
+    - a step that failed after moving (a fault in its growth period, no photo): the agent redoes
+      it with the same action, which must not add to the failed move (the machine may stand at
+      the failed step's target, or at home after a person homed it).
+    """
+
+    def __init__(self) -> None:
+        self.answered: Light | None = None  # the light the last answered step reached
+        self.base: Light | None = None  # the next relative action applies to this one
+        self.bypass = False
+
+    def resume(self, light: Light | None) -> None:
+        self.answered = self.base = light
+        self.bypass = light is not None
+
+    def answered_at(self, light_msg: Any) -> None:
+        """A step (or reset) was answered with this reached light (a LightCommand)."""
+        self.answered = (float(light_msg.x), float(light_msg.z), float(light_msg.width),
+                         float(light_msg.radius))
+        self.base = None
+
+    def failed(self) -> None:
+        """The step in progress failed: its redo starts where the last answered one ended."""
+        self.base = self.answered
+
+    def take(self) -> Light | None:
+        """The base for the command being computed now (then none: it is used once)."""
+        base, self.base, self.bypass = self.base, None, False
+        return base
