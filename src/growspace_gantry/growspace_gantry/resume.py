@@ -15,9 +15,9 @@ after a person homed the machine (homing puts the light elsewhere than the episo
 Where GRBL is in alarm, that command is refused like any other until a person unlocks or homes
 it (``growspace-rig`` then prints WAITING FOR A PERSON and retries).
 
-Not covered: a position lost mid-episode WITHOUT a restart (an unplug, an alarm) and then
-re-established by homing: the next relative action starts from where homing left the machine
-(rule 1d), not from the episode's last light.
+A step that failed mid-episode (an unplug, an alarm, a camera gone) is redone the same way
+(``StepBase``). Not covered: a position lost BETWEEN two steps and re-established by homing:
+the next relative action starts from where homing left the machine (rule 1d).
 
 Why the step in progress is never lost nor done twice: ``record.py`` writes each step's answer
 to the recording and pushes it to the OS before it is published, so a step the runner saw
