@@ -18,7 +18,11 @@
   again, gantry_node with ``resume_path``, and the run resumed.
 
 Where the gantry is in alarm, its steps are refused and the runner prints WAITING FOR A PERSON;
-the soak, playing the person, calls ``gantry/home`` then (never ``gantry/unlock``). A camera
+the soak, playing the person, calls ``gantry/home`` then (never ``gantry/unlock``). The photo
+twin is not stateless: a restarted camera_node grows its plant again from the episode's start
+under the light of the step asked (its history is gone), a plant the pipeline may refuse to read
+(e.g. ``plants: 2 stem base(s)``); after 15 refusals of one step in a row the person restarts
+camera_node with another twin_seed (other photo conditions), counted as re-mounted. A camera
 gone or an unplug fails the step in progress: the runner retries it (same action, a new
 step_id) and the gantry, which counts only answered steps, does it once. ``resumes`` counts the
 ``growspace-rig resume`` runs; unplug and camera_kill are recovered without one (the runner
@@ -49,6 +53,7 @@ RIG = {10: 1, 20: 1, 22: 1, 30: 1000, 32: 1, 110: 6000, 111: 6000, 112: 6000, 13
        131: 900, 132: 500}  # tests/test_gantry_node.py's rig, with homing enabled
 NAMESPACE = '/soak_rig'
 TMPFS_BYTES = 8 * 1024 * 1024
+REMOUNT_AFTER = 15  # camera refusals of one step in a row before the person steps in
 
 
 def _executable(package: str, name: str) -> str:
@@ -69,12 +74,14 @@ class Rig:
         self.camera: subprocess.Popen | None = None
         self.gantry: subprocess.Popen | None = None
         self.homed = 0
+        self.twin_seed = 2
+        self.remounted = 0  # camera_node restarted by the person after repeated refusals
         self._log = open(out / 'nodes.log', 'a')  # noqa: SIM115 - closed in close()
 
     def start_camera(self) -> None:
         self.camera = subprocess.Popen(
             [_executable('growspace_camera', 'camera_node'), '--ros-args', '-r',
-             f'__ns:={NAMESPACE}', '-p', 'source:=twin', '-p', 'twin_seed:=2'],
+             f'__ns:={NAMESPACE}', '-p', 'source:=twin', '-p', f'twin_seed:={self.twin_seed}'],
             stdout=self._log, stderr=subprocess.STDOUT)
 
     def start_gantry(self) -> None:
@@ -194,11 +201,23 @@ def run(args, count) -> int:
     log = out / 'runner.log'
 
     calls = threading.Lock()
+    refused: list[str] = []  # the camera's refusals of the same step, in a row
 
     def person(line: str) -> None:
         with calls:
             if rig.grbl.state == 'Alarm':
                 rig.home()
+            step = line.split(' was refused')[0]
+            if 'error: camera:' not in line or (refused and refused[-1] != step):
+                refused.clear()
+            if 'error: camera:' in line:
+                refused.append(step)
+            if len(refused) >= REMOUNT_AFTER:  # the twin regrew a plant it cannot read:
+                refused.clear()  # a person re-mounts the camera (other photo conditions)
+                rig.kill('camera')
+                rig.twin_seed += 1
+                rig.remounted += 1
+                rig.start_camera()
 
     def steps() -> int:
         try:
@@ -298,7 +317,8 @@ def run(args, count) -> int:
     finally:
         if not rig._log.closed:
             rig.close()
-    print(f'faults by kind: {kinds}; homed by the person: {rig.homed}; steps shorter than '
+    print(f'faults by kind: {kinds}; homed by the person: {rig.homed}; camera re-mounted by '
+          f'the person: {rig.remounted}; steps shorter than '
           f'their growth period: {short}; night {night[0]}-{night[1]} UTC', flush=True)
     print(f'soak: steps={totals["steps"]} faults={faults} resumes={resumes} '
           f'lost={totals["lost"]} duplicated={totals["duplicated"]} '
