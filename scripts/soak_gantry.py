@@ -184,6 +184,7 @@ def run(args, count) -> int:
         os.environ['SOAK_RIG_MOUNT_NS'] = '1'
         os.execvp('unshare', ['unshare', '-m', sys.executable, *sys.argv])
     from growspace_sim.core.photoperiod import Photoperiod
+    from growspace_sim.replay import Bag, read_episodes
     from growspace_sim.ros import loopback
 
     loopback.confine()
@@ -303,8 +304,8 @@ def run(args, count) -> int:
                 rig.start_gantry()
                 runner = resume()
         rig.close()
-        from growspace_sim.replay import Bag, read_episodes
-
+        # The tmpfs goes with this process's mount namespace: keep the run directory first.
+        subprocess.run(['cp', '-a', str(run_dir), str(out / 'run')], check=False)
         totals = count(run_dir, episodes, rig.recording)
         period = Photoperiod(night[1], night[0])
         with Bag(rig.recording) as bag:
@@ -313,7 +314,6 @@ def run(args, count) -> int:
                             s.commands[-1].header.stamp.sec
                             + s.commands[-1].header.stamp.nanosec / 1e9,
                             s.log_time / 1e9) < args.growth_s * 0.999)
-        subprocess.run(['cp', '-a', str(run_dir), str(out / 'run')], check=False)
     finally:
         if not rig._log.closed:
             rig.close()
