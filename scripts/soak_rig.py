@@ -1,7 +1,12 @@
-"""Soak the experiment runner: a long run on sim_node with faults injected at random, each
-followed by ``growspace-rig resume``; at the end, count what was lost, duplicated or unreadable.
+"""Soak the experiment runner: a long run with faults injected at random, each followed by
+``growspace-rig resume``; at the end, count what was lost, duplicated or unreadable.
 
     python scripts/soak_rig.py --steps 1000 --faults 20 --seed 1 --out /tmp/soak
+    python scripts/soak_rig.py --chamber sim --steps 1000 --faults 20 --seed 1 --out /tmp/s2
+
+``--chamber rig`` (the default; root: a tmpfs in its own mount namespace for the full disk):
+gantry_node on the GRBL emulator with the photo twin, its faults and checks in
+``soak_gantry.py``. ``--chamber sim``: sim_node, the faults below.
 
 Faults (chosen at random after a random number of steps, inside an episode or between two):
 - ``runner_kill``: SIGKILL to the runner (its sim_node stops by itself and finishes its file);
@@ -18,10 +23,7 @@ the run missing from either, ``duplicated`` those in either more than once, ``un
 the recording's files that do not open, and ``max_resume_s`` the longest time from starting
 ``resume`` to its first new journaled step. Exit 0 when lost, duplicated and unreadable are 0.
 
-The rig's faults (an unplugged gantry, a camera gone, gantry_node or camera_node killed) and a
-full disk need the GRBL emulator and the photo twin (issue 31 item 6, with gantry_node's growth
-period): not here yet. This soak exercises the runner, the journal, the split recording and
-sim_node's resume.
+This soak exercises the runner, the journal, the split recording and sim_node's resume.
 """
 
 from __future__ import annotations
@@ -105,8 +107,11 @@ def _wait_for_steps(proc: subprocess.Popen, run: Path, target: int, timeout_s: f
     return True
 
 
-def count(run: Path, episodes: int) -> dict[str, int]:
-    """Steps once, lost, duplicated (journal and recording), unreadable recording files."""
+def count(run: Path, episodes: int, recording: Path | None = None) -> dict[str, int]:
+    """Steps once, lost, duplicated (journal and recording), unreadable recording files.
+
+    ``recording``: the chamber's split recording (default: the run directory's). A step of the
+    recording counts only with its camera image (a rig step without its photo is lost)."""
     from growspace_sim.recording import repair, split_files
     from growspace_sim.replay import Bag, read_episodes, ReplayError
     from growspace_sim.rig.rundir import read_journal
@@ -115,7 +120,7 @@ def count(run: Path, episodes: int) -> dict[str, int]:
     state = read_journal(run / 'journal.jsonl')
     journal = {(e.index, s.step) for e in state.episodes for s in e.steps}
     duplicated = state.duplicated
-    recording = run / 'recording'
+    recording = recording or run / 'recording'
     repair(recording)
     unreadable = 0
     for path in split_files(recording):
@@ -130,6 +135,8 @@ def count(run: Path, episodes: int) -> dict[str, int]:
             if not 0 <= index < episodes:
                 continue  # the node's own start-up episodes
             for record in episode.stepped:
+                if 'camera/image_raw' not in record.outputs:
+                    continue
                 key = (index, int(record.result.step))
                 recorded[key] = recorded.get(key, 0) + 1
     duplicated += sum(n - 1 for n in recorded.values() if n > 1)
@@ -145,14 +152,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--faults', type=int, default=20, help='faults to inject (>= 0)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the faults and the run')
     parser.add_argument('--out', type=Path, required=True, help='a new directory for the run')
-    parser.add_argument('--step-timeout', type=float, default=600.0, metavar='SECONDS')
+    parser.add_argument('--step-timeout', type=float, default=None, metavar='SECONDS',
+                        help='default 600 (sim), 90 (rig: a step may wait out a night)')
+    parser.add_argument('--chamber', choices=('rig', 'sim'), default='rig')
+    parser.add_argument('--growth-s', type=float, default=0.1,
+                        help='rig: growth_s of each step [s]')
+    parser.add_argument('--night-after-min', type=int, default=3,
+                        help='rig: a one-minute night begins this many minutes in')
     args = parser.parse_args(argv)
+    if args.step_timeout is None:
+        args.step_timeout = 90.0 if args.chamber == 'rig' else 600.0
     if args.steps < EPISODE_LENGTH:
         parser.error(f'argument --steps: {args.steps} is too few; at least {EPISODE_LENGTH}.')
     if args.faults < 0:
         parser.error(f'argument --faults: {args.faults} is not allowed; >= 0.')
     if args.out.exists():
         parser.error(f'argument --out: {args.out} exists already; give a new directory.')
+    if args.chamber == 'rig':
+        import soak_gantry
+
+        return soak_gantry.run(args, count)
     episodes = -(-args.steps // EPISODE_LENGTH)
     total = episodes * EPISODE_LENGTH
     rng = random.Random(args.seed)

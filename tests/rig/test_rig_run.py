@@ -131,7 +131,8 @@ def test_sigkill_mid_episode_then_resume_runs_every_step_exactly_once(tmp_path, 
 def test_soak_script_injects_faults_and_loses_nothing(tmp_path):
     """scripts/soak_rig.py, short: 100 steps, 4 faults, each followed by a resume."""
     out = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[2] / 'scripts'
-                                              / 'soak_rig.py'), '--steps', '100', '--faults',
+                                              / 'soak_rig.py'), '--chamber', 'sim',
+                          '--steps', '100', '--faults',
                           '4', '--seed', '5', '--out', str(tmp_path / 'soak')],
                          capture_output=True, text=True, timeout=2 * TIMEOUT_S)
     assert out.returncode == 0, out.stdout + out.stderr

@@ -286,3 +286,22 @@ def test_the_replay_policy_plays_a_recordings_actions_step_by_step(tmp_path):
         [int(r.commands[0].action) for r in recorded.stepped]
     # The fake chamber is the simulator: the recorded rewards come back bit for bit.
     assert [s.reward for s in episode.steps] == [float(r.result.reward) for r in recorded.stepped]
+
+
+def test_the_runners_photoperiod_holds_a_step_until_lights_on_and_is_checked_when_created():
+    from growspace_sim.rig.schedule import hold_for, next_lit
+
+    settings = RunSettings(chamber='sim', lights_on='06:00', lights_off='20:00',
+                           utc_offset_h=1.0)  # local standard time = UTC + 1 h
+    hold = hold_for(settings.photoperiod)
+    day = dt.datetime(2026, 11, 28, 9, 30, tzinfo=UTC)  # 10:30 local: lit
+    assert hold(day) == day
+    night = dt.datetime(2026, 11, 28, 19, 30, tzinfo=UTC)  # 20:30 local: held
+    assert hold(night) == dt.datetime(2026, 11, 29, 5, 0, tzinfo=UTC)  # 06:00 local
+    crossing = RunSettings(chamber='sim', lights_on='22:00', lights_off='04:00').photoperiod
+    noon = dt.datetime(2026, 11, 28, 12, 0, tzinfo=UTC)
+    assert next_lit(crossing, noon) == dt.datetime(2026, 11, 28, 22, 0, tzinfo=UTC)
+    assert hold_for(RunSettings().photoperiod) is None  # no night: nothing held
+    with pytest.raises(RunDirError) as error:
+        RunSettings(lights_on='06:00')
+    assert error.value.field == 'lights_on' and 'give both' in str(error.value)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 import dataclasses
 import logging
+import os
 import sys
 import threading
 from typing import Any
@@ -20,6 +21,7 @@ from growspace_gantry import calibration
 from growspace_gantry.controller import GrblController, Log
 from growspace_gantry.link import SerialLink
 from growspace_gantry.node import GantryNode
+from growspace_gantry.resume import GantryResume, load, ResumeError
 from growspace_gantry.settings import GantryParams
 from growspace_sim.core.config import SimConfig
 from growspace_sim.node import params
@@ -35,6 +37,20 @@ log = logging.getLogger('growspace_gantry.gantry_node')
 def default_calibration() -> str:
     """The installed ``config/gantry.yaml`` (or the source tree's, when not installed)."""
     return str(share_file('growspace_gantry', 'config', 'gantry.yaml'))
+
+
+def load_resume(path: str) -> GantryResume | None:
+    """``resume_path``'s last episode (``resume.py``), None when empty or holding none.
+
+    Raises:
+        ParamError: it cannot be read or continued.
+    """
+    if not path:
+        return None
+    try:
+        return load(path)
+    except ResumeError as e:
+        raise ParamError(str(e)) from None
 
 
 def run(argv: Sequence[str], stop: threading.Event) -> int:
@@ -55,12 +71,16 @@ def run(argv: Sequence[str], stop: threading.Event) -> int:
                                   f'{typos}: not parameters of gantry_node (a typo?)')
         cfg, settings = params.build(values, GantryParams)
         cal = calibration.load(settings.calibration or default_calibration())
-        recorder = make_recorder(settings.record_path)
+        resume = load_resume(settings.resume_path)  # before a new split file opens there
+        same = bool(settings.resume_path) and os.path.abspath(settings.resume_path) == \
+            os.path.abspath(settings.record_path)
+        recorder = make_recorder(settings.record_path, settings.record_max_bytes,
+                                 settings.record_max_duration_s, append=same)
         logger = transport.logger
         controller = GrblController(lambda: SerialLink(settings.port, settings.baud), cal,
                                     Log(logger.warn, logger.info), 1.0 / settings.status_hz,
                                     photo_light=settings.photo_light)
-        node = GantryNode(transport, controller, cfg, settings, recorder)
+        node = GantryNode(transport, controller, cfg, settings, recorder, resume=resume)
         logger.info(f'gantry_node {transport.resolve("~")}: {settings.mode} mode, '
                     f'{cfg.challenge} light, port {settings.port}'
                     + (f', recording to {settings.record_path}' if recorder else ''))

@@ -1,7 +1,6 @@
 """The gantry node's logic over the simulator's ``Transport``: topics in, moves out, safety.
 
-Same topics and messages as ``sim_node`` (``growspace_sim.ros.interface``), relative to the
-chamber namespace:
+Same topics and messages as ``sim_node`` (``growspace_sim.ros.interface``), in its namespace:
 
 - in ``light/command`` (growspace_msgs/LightCommand): every mode; actions move the light by the
   simulator's own rules
@@ -10,14 +9,13 @@ chamber namespace:
 - in ``gantry/estop`` (std_msgs/Empty topic and std_srvs/Trigger service): feed hold, lamp off,
   soft reset
 - in ``gantry/unlock``, ``gantry/home`` (std_srvs/Trigger): a person's ``$X`` / ``$H``
+- with ``resume_path``: the last episode of its recording goes on (``resume.py``)
 - out ``chamber/config`` (std_msgs/String, latched JSON): the simulator's keys, and
   ``target``, the episode's target exactly as the camera is sent it (``target_payload``), so a
   recording holds it and never needs the layout run again
-- out ``light/state`` (growspace_msgs/LightCommand): the light the controller REPORTS reaching
-- out ``step_result`` (growspace_msgs/StepResult): once per reset and lockstep command, when the
-  move is done
-- out ``gantry/status`` (diagnostic_msgs/DiagnosticArray): state, position, alarm, buffer, link
-  (1 Hz and on change)
+- out ``light/state`` (LightCommand): the light the controller REPORTS reaching
+- out ``step_result`` (StepResult): once per reset and lockstep command, when it is done
+- out ``gantry/status`` (DiagnosticArray): state, position, alarm, buffer, link (1 Hz, on change)
 - with ``growth_s`` (lockstep): a step's growth period, lamp on at the target, between its move
   and its photo (``growth.py``); the lamp follows the photoperiod (``lights_on``/``lights_off``)
 - with ``camera`` (lockstep): calls camera_node's ``camera/capture`` after each reached move and
@@ -49,6 +47,8 @@ from growspace_gantry.calibration import Calibration, TargetError
 from growspace_gantry.controller import GrblController, Log
 from growspace_gantry.growth import StepTime
 from growspace_gantry.photo import capture_request, outputs, Photographer, Shot
+from growspace_gantry.record import NodeRecording
+from growspace_gantry.resume import GantryResume, StepBase
 from growspace_gantry.safety import Safety
 from growspace_gantry.settings import GantryParams
 from growspace_gantry.status import diagnostics, DIAGNOSTICS
@@ -95,12 +95,14 @@ class GantryNode:
         recorder: receives every message's CDR bytes, or None.
         clock: monotonic time [s].
         wall_clock: UTC time [s since the epoch] (the growth period and the photoperiod).
+        resume: go on with the last episode of a recording (``resume.py``), or None.
     """
 
     def __init__(self, transport: Transport, controller: GrblController, cfg: SimConfig,
                  params: GantryParams, recorder: Recorder | None = None,
                  clock: Callable[[], float] = time.monotonic,
-                 wall_clock: Callable[[], float] = time.time) -> None:
+                 wall_clock: Callable[[], float] = time.time,
+                 resume: GantryResume | None = None) -> None:
         self.transport = transport
         self.log = transport.logger
         self.controller = controller
@@ -108,18 +110,18 @@ class GantryNode:
         self.params = params
         self.cfg = cfg
         self.clock = clock
-        self.recorder = recorder
+        self.recording = NodeRecording(recorder, transport, self.log.warn)
         self.sim = Simulation(cfg)  # the light model: never stepped
         self.reset_id = 0
         self.last_step_id = 0
-        self.steps = 0  # commands stepped in this episode
+        self.steps = 0  # steps of this episode answered without an error (a failed one is
+        # redone by the agent: counting it would skip its number; resume.py)
         self.config = ''  # the episode's chamber/config payload, also sent with each photo
         self.pending: tuple[int, int, float] | None = None  # (reset_id, step_id, deadline)
         self.safety = Safety(controller, Log(self.log.warn, self.log.info), self._fail_pending,
                              params.watchdog_s, clock())
         self._next_status = 0.0
         self._status_key: tuple = ()
-        self._channels: dict[str, int] = {}
         self._size_warned = False
         self.photo: Photographer | None = None
         self.step_time = StepTime(params.growth_s if params.mode == 'lockstep' else 0.0,
@@ -137,7 +139,8 @@ class GantryNode:
         handlers = {'reset': self.on_reset, 'command': self.on_command,
                     'estop': lambda msg, cdr: self.estop('gantry/estop topic')}
         for t in INPUTS:
-            transport.subscribe(t.typename, t.name, t.qos, self._recorded(t.key, handlers[t.key]))
+            transport.subscribe(t.typename, t.name, t.qos,
+                                self.recording.received(t.key, handlers[t.key]))
         transport.serve(TRIGGER, 'gantry/estop', lambda req: self._trigger(
             self.estop('gantry/estop service')))
         transport.serve(TRIGGER, 'gantry/unlock', lambda req: self._trigger(
@@ -147,8 +150,15 @@ class GantryNode:
             self.safety.home(), 'homing ($H) sent'))
         transport.create_timer(POLL_S, self.poll)
         seed = params.seed if params.seed >= 0 else secrets.randbits(63)
+        self.base = StepBase()  # where a resumed or redone step's action starts
+        if resume is not None:
+            seed = self._resume(resume)
         self._start_recording(seed)
         self.sim.reset(seed=seed)
+        if resume is not None and resume.light is not None:
+            x, z, width, radius = resume.light
+            self.sim.place_light(x=x, z=z, width=width, radius=radius)
+            self.base.resume(resume.light)
         self._publish_config(seed)
         # The machine does not move at start-up: the first command or reset moves it.
 
@@ -168,18 +178,26 @@ class GantryNode:
                 self._result(step_id, self.reset_id, info=EPISODE_OVER, truncated=True)
                 return
         relative = int(msg.mode) in (convert.MODE_DISCRETE, convert.MODE_CONTINUOUS)
-        reason = self.safety.refusal(relative)
+        # The first action after a resume, or the redo of a failed step: from the light the
+        # last answered step reached, absolutely (not from where a failed move or homing left
+        # it); after a resume even before the position is re-established (resume.py).
+        recorded = relative and self.base.bypass
+        reason = self.safety.refusal(relative and not recorded)
         if reason:
             self._refused('command:refused', f'light/command: not sent: {reason}',
                           step_id if lockstep else None, f'error: gantry not ready: {reason}')
             return
+        if lockstep and (self.pending or self.step_time.busy or self.photo and self.photo.busy):
+            self._fail_pending(f'superseded by a newer command (step_id {step_id})')  # redone
         light = self.sim.chamber.light
         before = light.copy()
         try:
+            base = self.base.base if relative else None
             if relative:  # from the light the machine reached, never from a target
                 reached = self.cal.to_light(self.controller.position, light)
-                self.sim.place_light(x=reached.x, z=reached.z, width=reached.width,
-                                     radius=reached.radius)
+                x, z, width, radius = base or (reached.x, reached.z, reached.width,
+                                               reached.radius)
+                self.sim.place_light(x=x, z=z, width=width, radius=radius)
             convert.apply_command(self.sim, msg)
             target = self.cal.to_machine(self.sim.chamber.light)
         except (CommandError, TargetError) as e:
@@ -190,7 +208,8 @@ class GantryNode:
                           f'light/command: not sent to the machine: {e}',
                           step_id if lockstep else None, f'error: {e}')
             return
-        self._move(target, step_id if lockstep else None, placing=not relative)
+        self.base.take()
+        self._move(target, step_id if lockstep else None, placing=not relative or recorded)
 
     def on_reset(self, msg: Any, cdr: bytes) -> None:
         """A ResetRequest: place the light as the simulator would, then move there."""
@@ -248,8 +267,6 @@ class GantryNode:
             reset_id, step_id, deadline = self.pending
             if c.reached():
                 self.pending = None
-                if step_id:
-                    self.steps += 1
                 if not grow.start(reset_id, step_id):
                     self._answer(reset_id, step_id)
             elif c.phase != 'ready':
@@ -309,6 +326,8 @@ class GantryNode:
         else:
             return
         self.pending = None
+        if step_id:
+            self.base.failed()
         self.log.warn('move', f'gantry: step_id {step_id} failed: {reason}')
         self._result(step_id, reset_id, info=f'error: {reason}')
 
@@ -320,12 +339,14 @@ class GantryNode:
         light = self._reached_light(step_id, stamp)
         if self.photo is not None:
             chamber = self.sim.chamber
-            request = capture_request(stamp, step_id, self.steps, self.config, light, self.cfg,
-                                      chamber.target, chamber.target_mask,
+            request = capture_request(stamp, step_id, self.steps + bool(step_id), self.config,
+                                      light, self.cfg, chamber.target, chamber.target_mask,
                                       self.params.frame_id)
             self.photo.start(reset_id, step_id, stamp, light, request, self.clock())
             return
         self._publish('light', light)
+        self.base.answered_at(light)
+        self.steps += bool(step_id)
         truncated = self.steps >= self.cfg.episode_length
         self._result(step_id, reset_id, stamp=stamp, truncated=truncated)
 
@@ -335,6 +356,8 @@ class GantryNode:
         messages, outcome, failure = outputs(response, shot.light, shot.stamp, self.cfg, failure)
         for key, msg in messages:
             self._publish(key, msg)
+        self.steps += bool(shot.step_id) and not failure
+        self.base.failed() if failure and shot.step_id else self.base.answered_at(shot.light)
         truncated = self.steps >= self.cfg.episode_length
         if failure:
             self.log.warn('camera:step', f'gantry: step_id {shot.step_id}: no measurement '
@@ -372,51 +395,34 @@ class GantryNode:
         return types.new(f'{TRIGGER}_Response', success=not error, message=error or done)
 
     def _publish(self, key: str, msg: Any) -> None:
-        cdr = self._pubs[key](msg)
-        self._record(key, cdr)
+        if key == 'result' and self.recording.wants(key):  # on disk before anyone sees it
+            self.recording.write(key, types.serialize(msg, types.STEP_RESULT), flush=True)
+            self._pubs[key](msg)
+            return
+        self.recording.write(key, self._pubs[key](msg))
 
     # --- recording (the node's own run, in the simulator's format) -----------------------
 
-    def _recorded(self, key: str, handler: Callable[[Any, bytes], None]) -> Callable:
-        def receive(msg: Any, cdr: bytes) -> None:
-            self._record(key, cdr)
-            handler(msg, cdr)
-        return receive
+    def _resume(self, point: GantryResume) -> int:
+        """Take the recorded episode's identity (``resume.py``); returns its seed."""
+        self.cfg, self.sim = point.cfg, Simulation(point.cfg)
+        self.reset_id, self.last_step_id, self.steps = point.reset_id, point.last_step_id, \
+            point.steps
+        self.log.info(f'gantry: resumed episode reset_id {point.reset_id} after step '
+                      f'{point.steps} (last step_id {point.last_step_id}'
+                      + (', the episode was over' if point.over else '') + '); the next '
+                      'relative action is placed absolutely from the recorded light')
+        return point.seed
 
     def _start_recording(self, seed: int) -> None:
-        if self.recorder is None:
-            return
         namespace = self.transport.resolve('~').rsplit('/', 1)[0] or '/'
-        metadata = growspace_metadata(self.cfg, seed, namespace=namespace,
-                                      frame_id=self.params.frame_id, rate_hz=0.0,
-                                      lockstep=self.params.mode == 'lockstep')
-        try:
-            for t in (*INPUTS, *self.outputs):
-                self._channels[t.key] = self.recorder.add_channel(
-                    self.transport.resolve(t.name), t.typename, t.qos)
-            self.recorder.add_metadata(METADATA_NAME, metadata)
-            self.recorder.add_metadata(GANTRY_METADATA, {  # with each step's growth rule
+        self.recording.start((*INPUTS, *self.outputs), {
+            METADATA_NAME: growspace_metadata(self.cfg, seed, namespace=namespace,
+                                              frame_id=self.params.frame_id, rate_hz=0.0,
+                                              lockstep=self.params.mode == 'lockstep'),
+            GANTRY_METADATA: {  # with each step's growth rule
                 'version': __version__, 'port': self.params.port, **self.params.step_time(),
-                'calibration': json.dumps(dataclasses.asdict(self.cal), sort_keys=True)})
-        except Exception as e:  # noqa: BLE001 - recording never stops the machine's safety
-            self._recording_failed(e)
-
-    def _record(self, key: str, cdr: bytes) -> None:
-        channel = self._channels.get(key)
-        if channel is None:
-            return
-        now = self.transport.now_ns()
-        try:
-            self.recorder.write_many([(channel, cdr, now, now)])
-        except Exception as e:  # noqa: BLE001 - same
-            self._recording_failed(e)
-
-    def _recording_failed(self, error: Exception) -> None:
-        if getattr(self.recorder, 'error', None) is None:
-            self.log.warn('recorder', f'recorder: a message was not recorded: {error}')
-            return
-        self._channels.clear()
-        self.log.warn('recorder:stopped', f'recording stopped, the gantry goes on: {error}')
+                'calibration': json.dumps(dataclasses.asdict(self.cal), sort_keys=True)}})
 
     # --- shutdown --------------------------------------------------------------------------
 
@@ -440,11 +446,5 @@ class GantryNode:
             self._fail_pending('the gantry node is shutting down')
         except Exception:  # noqa: BLE001 - a signal already shut the ROS context down
             self.pending = None
-        recorder, self.recorder = self.recorder, None
-        self._channels.clear()
-        if recorder is not None:
-            try:
-                recorder.close()
-            except Exception as e:  # noqa: BLE001 - shutting down goes on
-                self.log.warn('recorder', f'recorder close failed: {e}')
+        self.recording.close()
 

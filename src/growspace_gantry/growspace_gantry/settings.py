@@ -37,8 +37,19 @@ class GantryParams:
                                   'failed', unit='s', bounds=Bounds(0.1, 1e6))
     seed: int = seed_param("seed of the first episode's light layout")
     frame_id: str = frame_param('chamber', 'frame of light state and step results')
-    record_path: str = param('', 'MCAP file to record the hardware run to; empty = no '
-                             'recording')
+    record_path: str = param('', 'MCAP file to record the hardware run to (with a limit below, '
+                             'a split directory); empty = no recording')
+    record_max_bytes: int = param(0, 'split the recording into files of about this many message '
+                                  'bytes (as sim_node; rosbag2 --max-bag-size); 0 = one file',
+                                  unit='B', bounds=Bounds(0, 10**15, integer=True))
+    record_max_duration_s: float = param(0.0, 'split the recording into files of at most this '
+                                         'much wall time each (rosbag2 --max-bag-duration); '
+                                         '0 = no duration limit', unit='s', bounds=Bounds(0.0))
+    resume_path: str = param('', "go on with the last episode of this gantry_node's recording "
+                             '(a split directory): its reset_id, step count and last step_id '
+                             'kept, the first relative action placed absolutely from the '
+                             'recorded light; the same directory as record_path continues it '
+                             'with a new file; empty = a new episode at start-up')
     camera: str = param('', "camera_node's capture service, called after each reached move "
                         '(lockstep): its measurement answers the step; empty = no camera: '
                         'light/state and step_result only, reward 0',

@@ -83,7 +83,9 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
     """Group a chamber's messages into episodes (a StepResult with step 0 starts one).
 
     A StepResult that no observation preceded answered a request without a step (a rejected
-    command or reset, a command after the episode's end); it goes to ``Episode.rejected``. Steps
+    command or reset, a command after the episode's end); it goes to ``Episode.rejected``, as
+    does a StepResult whose ``info`` is an error (a gantry step that failed in its growth period
+    or photo: not counted by the gantry, redone by the agent). Steps
     recorded before the first reset (a recorder that joined a running chamber) are dropped:
     without their reset they cannot be re-simulated.
 
@@ -127,6 +129,10 @@ def read_episodes(bag: Bag, namespace: str | None = None) -> list[Episode]:
             outputs[rel] = msg
         elif rel == NAMES['result']:
             result = msg.decode()
+            if result.info.startswith('error'):
+                # A step that failed after its outputs (gantry_node: a fault in its growth
+                # period, no photo): not done, the agent redoes it; its outputs stay unmatched.
+                outputs = {}
             if not outputs:
                 # Nothing changed; the commands so far still count (realtime: the latest one
                 # applies at the next tick).

@@ -132,7 +132,9 @@ class AttachedChamber(_LinkChamber):
 
     The runner cannot read its recording (the node writes it where it was told), so a resume
     goes on from the journal alone: a step in progress at the crash is resent with its own
-    step_id, which a chamber that did it refuses as a duplicate (``Runner._step``).
+    step_id, which a chamber that did it refuses as a duplicate (``Runner._step``). A chamber
+    node that restarted meanwhile must continue the episode to answer it: ``sim_node`` and
+    ``gantry_node`` with ``resume_path`` on their own recording (docs/hardware.md).
     """
 
     def prepare(self) -> dict[int, list[RecordedStep]]:

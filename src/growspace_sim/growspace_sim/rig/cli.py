@@ -24,7 +24,8 @@ _OPTIONS = {'policy': '--policy', 'policy_path': '--policy-path', 'challenge': '
             'chamber': '--chamber', 'namespace': '--namespace',
             'step_period_s': '--step-period', 'step_timeout_s': '--step-timeout',
             'retry_period_s': '--retry-period', 'record_max_bytes': '--record-max-bytes',
-            'record_max_duration_s': '--record-max-duration'}
+            'record_max_duration_s': '--record-max-duration', 'lights_on': '--lights-on',
+            'lights_off': '--lights-off', 'utc_offset_h': '--utc-offset'}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,6 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument('--record-max-duration', type=float,
                      default=defaults.record_max_duration_s, metavar='SECONDS',
                      help='... and of at most this much log time (0: no limit)')
+    run.add_argument('--lights-on', default='', metavar='HH:MM',
+                     help='a photoperiod the runner keeps (local standard time): no step begins '
+                     'before lights-on or after lights-off (sim_node; gantry_node has its own '
+                     'lights_on/lights_off parameters, leave these out there)')
+    run.add_argument('--lights-off', default='', metavar='HH:MM')
+    run.add_argument('--utc-offset', type=float, default=0.0, metavar='HOURS',
+                     help='local standard time minus UTC, all year (no DST)')
     for name in ('resume', 'status'):
         sub_parser = sub.add_parser(name, help='go on with RUN_DIR after a crash or a stop'
                                     if name == 'resume' else 'where RUN_DIR is')
@@ -123,6 +131,7 @@ def _run(rundir: RunDir, fail) -> int:
     from growspace_sim.recording import stop_on_signals
     from growspace_sim.rig.chambers import make_chamber
     from growspace_sim.rig.runner import Runner, RunnerError
+    from growspace_sim.rig.schedule import hold_for
 
     def say(line: str) -> None:
         print(line, flush=True)
@@ -133,7 +142,8 @@ def _run(rundir: RunDir, fail) -> int:
     chamber = make_chamber(rundir)
     try:
         with stop_on_signals():
-            Runner(rundir, chamber, say).run()
+            Runner(rundir, chamber, say,
+                   not_before=hold_for(rundir.settings.photoperiod)).run()
     except KeyboardInterrupt:
         say(f'stopped; `growspace-rig resume {rundir.path}` goes on at the next step.')
         return 130

@@ -33,6 +33,8 @@ from pathlib import Path
 import secrets
 from typing import Any
 
+from growspace_sim.core.photoperiod import Photoperiod
+
 RUN_FILE = 'run.json'
 JOURNAL_FILE = 'journal.jsonl'
 RECORDING_DIR = 'recording'
@@ -80,6 +82,8 @@ class RunSettings:
             a person must clear it) is tried again [s].
         record_max_bytes: Split the recording into files of this many message bytes (0 = no).
         record_max_duration_s: ... and of at most this much log time [s] (0 = no limit).
+        lights_on, lights_off, utc_offset_h: A photoperiod the runner keeps (``schedule.py``):
+            no step begins in the night ('' and '': none; for sim_node, the gantry has its own).
         created: When the run was created (UTC).
     """
 
@@ -96,6 +100,9 @@ class RunSettings:
     retry_period_s: float = 30.0
     record_max_bytes: int = 64 * 1024 * 1024
     record_max_duration_s: float = 0.0
+    lights_on: str = ''
+    lights_off: str = ''
+    utc_offset_h: float = 0.0
     created: str = ''
 
     def __post_init__(self) -> None:
@@ -123,10 +130,18 @@ class RunSettings:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise bad(name, 'a finite number >= 0')
+        try:
+            self.photoperiod  # noqa: B018 - both times or neither, HH:MM, a length
+        except ValueError as e:
+            raise RunDirError(str(e), field='lights_on') from None
         for name in ('step_timeout_s', 'retry_period_s'):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise bad(name, 'a finite number > 0')
+
+    @property
+    def photoperiod(self) -> Photoperiod:
+        return Photoperiod(self.lights_on, self.lights_off, self.utc_offset_h)
 
     def episode_seed(self, episode: int) -> int:
         """The seed episode ``episode`` (0-based) is reset with."""
