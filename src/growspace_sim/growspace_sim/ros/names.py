@@ -1,7 +1,8 @@
 """ROS 2 name rules as rcl applies them, for what runs without rclpy (the in-process node).
 
 `resolve_topic('plant/state', 'sim', '/chamber1')` gives `/chamber1/plant/state` and `~/debug`
-gives `/chamber1/sim/debug`, as ``rclpy.expand_topic_name`` does. On ROS, rcl itself resolves names and applies remappings.
+gives `/chamber1/sim/debug`, as ``rclpy.expand_topic_name`` does. On ROS,
+rcl itself resolves names and applies remappings.
 """
 
 from __future__ import annotations
