@@ -88,3 +88,45 @@ def test_the_redo_of_a_failed_step_moves_from_where_the_last_answered_step_left_
         assert rig.run_until(lambda: step_phase(rig) == 'growing' and rig.controller.reached())
     finally:
         rig.close()
+
+
+class DiskFull:
+    """A recorder whose disk fills up at the first message (as ``McapRecorder`` reports an I/O
+    error: the write raises and ``error`` names it from then on)."""
+
+    error: str | None = None
+
+    def add_channel(self, *args) -> int:
+        return 0
+
+    def add_metadata(self, *args) -> None:
+        pass
+
+    def write_many(self, records) -> None:
+        self.error = 'Cannot write recording run_0.mcap: No space left on device'
+        raise OSError(28, 'No space left on device')
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_recording_that_stopped_refuses_every_command_and_reset(tmp_path) -> None:
+    # Issue 31: nothing lost. A step the recording cannot hold would be a step no resume can
+    # find; so once the recorder has stopped, nothing moves until a person restarts the node.
+    rig = Rig(tmp_path, recorder=DiskFull())
+    try:
+        rig.ready()
+        reset = types.new(types.RESET_REQUEST, reset_id=RESET_ID, has_seed=True, seed=3)
+        rig.transport.inject('reset', reset)
+        assert rig.run_until(lambda: rig.results()), rig.transport.warnings
+        assert 'recording stopped' in rig.results()[-1].info
+        assert 'No space left on device' in rig.results()[-1].info
+        answer = rig.command(1, mode=convert.MODE_BEAM, x=0.5, width=0.2)
+        assert 'recording stopped' in answer.info and 'resume_path' in answer.info
+        assert jogs(rig.grbl) == []  # nothing moved
+        assert any('every command is refused' in w for w in rig.transport.warnings)
+    finally:
+        rig.close()

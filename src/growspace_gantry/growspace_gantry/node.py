@@ -182,7 +182,7 @@ class GantryNode:
         # last answered step reached, absolutely (not from where a failed move or homing left
         # it); after a resume even before the position is re-established (resume.py).
         recorded = relative and self.base.bypass
-        reason = self.safety.refusal(relative and not recorded)
+        reason = self.safety.refusal(relative and not recorded) or self.recording.stopped
         if reason:
             self._refused('command:refused', f'light/command: not sent: {reason}',
                           step_id if lockstep else None, f'error: gantry not ready: {reason}')
@@ -214,7 +214,7 @@ class GantryNode:
     def on_reset(self, msg: Any, cdr: bytes) -> None:
         """A ResetRequest: place the light as the simulator would, then move there."""
         reset_id = int(msg.reset_id)
-        reason = self.safety.refusal(relative=False)
+        reason = self.safety.refusal(relative=False) or self.recording.stopped
         try:
             if reason:
                 raise ValueError(f'gantry not ready: {reason}')

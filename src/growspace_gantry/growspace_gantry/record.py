@@ -7,7 +7,9 @@ which is what lets a restarted node continue the episode (``resume.py``) with no
 nothing done twice. A step lasts a growth period on the rig, so a chunk per step costs nothing.
 
 A failing recorder (disk full, file system gone) never stops the machine's safety: the node
-reports it once and records no more.
+reports it once, records no more, and refuses every later command and reset (``stopped``), so
+nothing moves or grows that the recording would not hold. A person frees the disk and restarts
+gantry_node with ``resume_path``, which goes on from the last recorded step.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class NodeRecording:
         self.transport = transport
         self.warn = warn
         self._channels: dict[str, int] = {}
+        self.stopped = ''  # why the recording stopped for good ('' while it records)
 
     def start(self, topics: Iterable[Topic], metadata: dict[str, dict[str, str]]) -> None:
         """Register each topic as a channel and write the metadata records."""
@@ -76,7 +79,9 @@ class NodeRecording:
             self.warn('recorder', f'recorder: a message was not recorded: {error}')
             return
         self._channels.clear()
-        self.warn('recorder:stopped', f'recording stopped, the gantry goes on: {error}')
+        self.stopped = (f'recording stopped ({error}): free the disk, then restart gantry_node '
+                        'with resume_path')
+        self.warn('recorder:stopped', f'{self.stopped}; until then every command is refused')
 
     def close(self) -> None:
         """Finish the recording (idempotent)."""
