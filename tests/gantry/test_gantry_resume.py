@@ -106,7 +106,7 @@ class DiskFull:
         self.error = 'Cannot write recording run_0.mcap: No space left on device'
         raise OSError(28, 'No space left on device')
 
-    def flush(self) -> None:
+    def flush(self, sync: bool = False) -> None:
         pass
 
     def close(self) -> None:

@@ -202,6 +202,23 @@ def test_full_disk_is_a_clear_error():
         McapRecorder('/dev/full', overwrite=True)
 
 
+def test_flush_with_sync_puts_the_file_on_the_disk(tmp_path, monkeypatch):
+    # gantry_node's answered steps must survive a power cut, not only a kill (issue 31).
+    from growspace_sim.recording import recorder as recorder_module
+
+    synced: list[int] = []
+    monkeypatch.setattr(recorder_module.os, 'fsync', synced.append)
+    with McapRecorder(tmp_path / 's.mcap') as rec:
+        channel = rec.add_channel('/a', types.STEP_RESULT, ros_qos.DEFAULT)
+        rec.write(channel, b'\x00\x01\x00\x00', 0, 0)
+        rec.flush()
+        assert synced == []
+        size = (tmp_path / 's.mcap').stat().st_size
+        rec.write(channel, b'\x00\x01\x00\x00', 1, 1)
+        rec.flush(sync=True)
+        assert len(synced) == 1 and (tmp_path / 's.mcap').stat().st_size > size
+
+
 def test_close_is_idempotent_and_later_writes_fail(tmp_path):
     rec = McapRecorder(tmp_path / 'c.mcap')
     channel = rec.add_channel('/a', types.STEP_RESULT, ros_qos.DEFAULT)

@@ -1,10 +1,11 @@
 """The gantry node's own recording, in the simulator's format (``docs/recording.md``).
 
 Every message in and out is recorded with the wall time it was handled at. A step's answer
-(``step_result``) is written, and the open chunk pushed to the OS, BEFORE it is published: a
-step the runner saw answered is in the recording even if the node is killed the next instant,
-which is what lets a restarted node continue the episode (``resume.py``) with nothing lost and
-nothing done twice. A step lasts a growth period on the rig, so a chunk per step costs nothing.
+(``step_result``) is written, and the open chunk put on the disk (fsync), BEFORE it is
+published: a step the runner saw answered is in the recording even if the node is killed or
+the power cut the next instant, which is what lets a restarted node continue the episode
+(``resume.py``) with nothing lost and nothing done twice. A step lasts a growth period on the
+rig, so a chunk and a disk write per step cost nothing.
 
 A failing recorder (disk full, file system gone) never stops the machine's safety: the node
 reports it once, records no more, and refuses every later command and reset (``stopped``), so
@@ -58,7 +59,7 @@ class NodeRecording:
         return receive
 
     def write(self, key: str, cdr: bytes, flush: bool = False) -> None:
-        """Record one message; ``flush``: push it (and all before it) to the OS now."""
+        """Record one message; ``flush``: put it (and all before it) on the disk now."""
         channel = self._channels.get(key)
         if channel is None:
             return
@@ -66,7 +67,7 @@ class NodeRecording:
         try:
             self.recorder.write_many([(channel, cdr, now, now)])
             if flush:
-                self.recorder.flush()
+                self.recorder.flush(sync=True)
         except Exception as e:  # noqa: BLE001 - same
             self._failed(e)
 

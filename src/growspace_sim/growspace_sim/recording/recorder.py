@@ -179,8 +179,12 @@ class McapRecorder:
             with self._io_errors():
                 self._writer.add_metadata(name, dict(data))
 
-    def flush(self) -> None:
+    def flush(self, sync: bool = False) -> None:
         """Close the open chunk and push everything to the OS (a hard kill then loses nothing).
+
+        Args:
+            sync: Also have the OS put it on the disk (``fsync``), so that a power cut loses
+                nothing either (costs a disk write: for steps that last minutes or more).
 
         Raises:
             RecordingError: The recorder is closed or failed, or writing failed now.
@@ -189,6 +193,9 @@ class McapRecorder:
             self._check_usable()
             with self._io_errors():
                 self._writer.flush()
+                if sync:
+                    self._stream.flush()
+                    os.fsync(self._stream.fileno())
                 self._last_flush = time.monotonic()
 
     def close(self) -> None:

@@ -311,10 +311,10 @@ class SplitRecorder:
                 self._first_ns = min(m[2] for m in mapped)
             self._last_ns = max(self._last_ns, max(m[2] for m in mapped))
 
-    def flush(self) -> None:
+    def flush(self, sync: bool = False) -> None:
         """As ``McapRecorder.flush``."""
         with self._lock:
-            self._recorder.flush()
+            self._recorder.flush(sync)
 
     def close(self) -> None:
         """Finish the open file and write ``metadata.yaml``; safe to call again."""
