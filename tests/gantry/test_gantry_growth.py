@@ -19,6 +19,8 @@ from growspace_sim.ros import types
 from test_gantry_node import Rig
 from test_gantry_safety import beam, call, place, status
 
+pytestmark = pytest.mark.slow  # each test drives the GRBL emulator for about 1 s
+
 GROWTH_S = 0.4
 LAMP_ON = ('M3', 1000.0)
 NIGHT = calendar.timegm((2026, 3, 2, 23, 0, 0))  # 23:00 UTC: lights 06:00-22:00 are off

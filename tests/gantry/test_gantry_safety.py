@@ -517,6 +517,7 @@ def far_beam(rig: Rig) -> float:
     return 0.1 if rig.grbl.mpos[0] > X0_MM + 450.0 else 0.8
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('mode', ['lockstep', 'realtime'])
 @pytest.mark.parametrize('state', ['Jog', 'Run', 'Hold'])
 def test_a_fault_stops_the_machine_in_every_motion_state(tmp_path, mode, state) -> None:

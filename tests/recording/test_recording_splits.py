@@ -16,6 +16,8 @@ from growspace_sim.recording import McapRecorder, RecordingError, SplitRecorder
 from growspace_sim.replay import Bag, compare, main as replay_main, ReplayError, resimulate
 from growspace_sim.replay.episodes import read_episodes, summary
 
+pytestmark = pytest.mark.slow  # records whole episodes (about 1 s each)
+
 
 def _run(recorder, episodes: int = 3, seed: int = 5) -> None:
     with recorder:

@@ -20,6 +20,8 @@ from growspace_sim.recording import SplitRecorder
 from growspace_sim.replay import Bag, resimulate, resume_point
 from growspace_sim.ros import types
 
+pytestmark = pytest.mark.slow  # re-simulates recorded episodes (1-2 s)
+
 SEEDS = (7, 8)  # two episodes: the crash falls in the first
 CRASH_AFTER = 17  # steps of the first episode recorded before the crash
 ACTIONS = np.random.default_rng(0).integers(0, 5, size=(len(SEEDS), 50))

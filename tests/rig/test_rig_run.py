@@ -26,6 +26,8 @@ from growspace_sim.replay import Bag, read_episodes, resimulate
 from growspace_sim.rig.rundir import read_journal
 from growspace_sim.rig.runner import recorded_episodes, reset_id_of
 
+pytestmark = pytest.mark.slow  # each test runs sim_node and the runner as processes
+
 SEED, EPISODES = 3, 2
 KILL_AFTER_STEPS = 20  # journaled steps before the SIGKILL: inside the first episode
 TIMEOUT_S = 300  # a whole run on a loaded 2-core machine, generous
