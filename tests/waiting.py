@@ -39,3 +39,35 @@ def wait_until(predicate: Callable[[], T], timeout: float, what: str, *,
             time.sleep(0.05)
         else:
             between()
+
+
+class LinkLines:
+    """The lines a test reads back from a controller's link, and a wait for the next one that
+    matches (a link: ``write(bytes)`` and ``read_lines()``, as ``growspace_gantry.link``'s).
+
+    Attributes:
+        seen: Every line read so far, in order.
+    """
+
+    def __init__(self, link, timeout: float = 5.0) -> None:  # noqa: ANN001 - any such link
+        self.link = link
+        self.timeout = timeout
+        self.seen: list[str] = []
+
+    def until(self, predicate: Callable[[str], bool], send: bytes | None = None) -> str:
+        """Send ``send`` (if any), then read lines until one matches; returns it."""
+        if send is not None:
+            self.link.write(send)
+        found: list[str] = []
+
+        def matched() -> bool:
+            for line in self.link.read_lines():
+                self.seen.append(line)
+                if predicate(line):
+                    found.append(line)
+                    return True
+            return False
+
+        wait_until(matched, self.timeout, 'a matching line from the controller',
+                   between=lambda: time.sleep(0.002), detail=lambda: f'got {self.seen[-5:]}')
+        return found[0]

@@ -10,7 +10,6 @@ transport.
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import numpy as np
@@ -413,22 +412,12 @@ def test_the_emulators_flood_output_follows_grbl(tmp_path) -> None:
     reset and a limit alarm (GRBL's ``mc_reset``) switch it off."""
     from grbl_emulator import GrblEmulator
     from growspace_gantry.link import SerialLink
+    from waiting import LinkLines
 
     with GrblEmulator(RIG_SETTINGS, speedup=40.0, link_dir=tmp_path) as grbl:
         link = SerialLink(grbl.port)
-        seen: list[str] = []
-
-        def until(predicate, send: bytes | None = None) -> str:
-            if send is not None:
-                link.write(send)
-            deadline = time.monotonic() + 5.0
-            while time.monotonic() < deadline:
-                for line in link.read_lines():
-                    seen.append(line)
-                    if predicate(line):
-                        return line
-                time.sleep(0.005)
-            raise AssertionError(f'not seen; got {seen[-5:]}')
+        lines = LinkLines(link)
+        until, seen = lines.until, lines.seen
 
         def report_with_overrides(within: int = 12) -> str:
             for _ in range(within):

@@ -455,22 +455,12 @@ def test_the_emulator_restarts_a_starved_jog_as_a_cycle_that_only_a_hold_stops(t
     while the hold decelerates is ``ALARM:3``."""
     from grbl_emulator import GrblEmulator
     from growspace_gantry.link import SerialLink
+    from waiting import LinkLines
 
     with GrblEmulator({**RIG_SETTINGS}, speedup=10.0, link_dir=tmp_path) as grbl:
         link = SerialLink(grbl.port)
-        seen: list[str] = []
-
-        def until(predicate, send: bytes | None = None) -> str:
-            if send is not None:
-                link.write(send)
-            deadline = time.monotonic() + 5.0
-            while time.monotonic() < deadline:
-                for line in link.read_lines():
-                    seen.append(line)
-                    if predicate(line):
-                        return line
-                time.sleep(0.002)
-            raise AssertionError(f'not seen; got {seen[-5:]}')
+        lines = LinkLines(link)
+        until, seen = lines.until, lines.seen
 
         def state() -> str:
             return until(lambda x: x.startswith('<'), b'?')[1:].split('|')[0]
