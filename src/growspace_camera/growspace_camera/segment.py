@@ -23,9 +23,14 @@ EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
+SEED = 2.0  # a region is plant only where it is this many times min_greenness green
+DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
+LIGHT_FLOOR = 0.35  # a light below this part of the backdrop's mean (per colour) is no light
 FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
-WARM = 0.08  # r - b on chromatic coordinates from which a dark pixel counts fully as bark
+WARM_FROM = 0.015  # warmth (``tissue``) below which a dark pixel is not bark at all
+WARM = 0.04  # ... and from which, this much above, it counts fully as bark
+BARK_DILUTION = 0.5  # the constant in the warmth's sum, in backdrop grey levels
 BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
 FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked against those above
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
@@ -216,6 +221,11 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
     padded = cv2.copyMakeBorder(np.clip(filled, 1.0, 255.0).astype(np.uint8), h, h, h, h,
                                 cv2.BORDER_REFLECT_101)
     light = cv2.medianBlur(padded, k)[h:-h, h:-h].astype(np.float32)
+    # A backdrop is never lit this little (vignetting and a lamp's cast take a fraction of the
+    # light, not nearly all of it): a light this dark follows a wide dark object (a cabinet
+    # post, a pot, soil), and dividing by it would make that object's noise read as colour.
+    floor = LIGHT_FLOOR * np.array(cv2.mean(bgr, backdrop.astype(np.uint8))[:3], np.float32)
+    np.maximum(light, floor, out=light)
     # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
     level = float(np.mean(cv2.mean(light)[:3]))
     return cv2.divide(bgr, light, scale=level), level, light
@@ -225,15 +235,23 @@ def tissue(bgr: np.ndarray, level: float) -> np.ndarray:
     """How much each pixel of an evenly lit photo looks like plant tissue, green or brown.
 
     Green tissue: excess green (``greenness``). Brown, woody tissue is not greener than the
-    backdrop, but it is darker and warmer (red above blue): its darkness below the backdrop's
-    ``level``, counted fully once its warmth (r - b on chromatic coordinates) reaches
-    ``WARM``. A neutral dark pixel (wood grain, a shadow, a fold) is not warm, so it stays low.
+    backdrop, but it is darker and warm: red above green above blue (bark's hue, 15-50
+    degrees). Its warmth is r - b, or 4 (g - b) where that is less (a purple or magenta
+    pixel, g below b, is not bark), on chromatic coordinates whose sum carries a grey
+    level's worth of constant (``BARK_DILUTION``): the few grey levels by which the channels
+    of a black post, a pot or dark soil differ (noise, JPEG, a tint) must not make it warm.
+    Tissue counts fully once that warmth reaches ``WARM`` above ``WARM_FROM``, times its
+    darkness below the backdrop's ``level``. A neutral dark pixel (wood grain, a shadow, a
+    fold) is not warm, so it stays low.
     """
     exg = greenness(bgr)
     total = cv2.transform(bgr, _SUM)
-    warm = cv2.divide(cv2.transform(bgr, _WARMTH), total + 30.0)
+    b, g, r = cv2.split(bgr)
+    hue_warmth = cv2.min(r - b, 4.0 * (g - b))
+    warm = cv2.divide(hue_warmth, total + BARK_DILUTION * max(level, 1.0))
     dark = 1.0 - total / (3.0 * max(level, 1.0))
-    brown = np.clip(warm * (1.0 / WARM), 0.0, 1.0) * np.clip(dark, 0.0, 1.0) * BROWN_WEIGHT
+    brown = (np.clip((warm - WARM_FROM) * (1.0 / WARM), 0.0, 1.0) * np.clip(dark, 0.0, 1.0)
+             * BROWN_WEIGHT)
     return np.maximum(exg, brown)
 
 
@@ -272,7 +290,12 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     found = found > max(_otsu(found), params.min_greenness)
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
-    exg = tissue(cv2.GaussianBlur(flat, (3, 3), 0), level)
+    flat = cv2.GaussianBlur(flat, (3, 3), 0)
+    exg = tissue(flat, level)
+    # A pixel this dark in the photo has no colour to read (sensor noise, JPEG, the tint of a
+    # black cabinet post): whatever the flat field makes of it, it is not tissue.
+    dim = cv2.transform(cv2.GaussianBlur(bgr, (3, 3), 0), _SUM) < 3.0 * DIM * float(balance.mean())
+    exg[dim] = np.minimum(exg[dim], 0.0)
     _floor_rows(exg, params.pixel_m)
     # Otsu splits two classes; with two plants of different greens it splits the backdrop
     # from the greener one and loses the other. Whatever stands clearly out of the
@@ -282,7 +305,9 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
     threshold = max(min(_otsu(exg), centre + NOISE_SIGMAS * noise), params.min_greenness)
     low = max(0.5 * threshold, params.min_greenness)
-    mask = _hysteresis(exg, low, threshold)
+    # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
+    # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
+    mask = _hysteresis(exg, low, threshold, greenness(flat), SEED * params.min_greenness)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
@@ -332,13 +357,18 @@ def _coverage(exg: np.ndarray, plant: np.ndarray, backdrop: float) -> np.ndarray
     return cover
 
 
-def _hysteresis(exg: np.ndarray, low: float, high: float) -> np.ndarray:
+def _hysteresis(exg: np.ndarray, low: float, high: float,
+                seeds: np.ndarray | None = None, seed_level: float = 0.0) -> np.ndarray:
     """Pixels above ``low`` that join (4-connected) a pixel above ``high``, uint8 0/1: the
     hysteresis threshold of scikit-image's ``apply_hysteresis_threshold``, on OpenCV's
-    connected components (several times faster on a chamber of mostly backdrop)."""
+    connected components (several times faster on a chamber of mostly backdrop). With
+    ``seeds``, the pixels above ``high`` must be above it and ``seed_level`` in ``seeds`` too."""
     count, labels = cv2.connectedComponents((exg > low).view(np.uint8), connectivity=4)
     strong = np.zeros(count, np.uint8)
-    strong[labels[exg > high]] = 1
+    high_px = exg > high
+    if seeds is not None:
+        high_px &= seeds > max(high, seed_level)
+    strong[labels[high_px]] = 1
     strong[0] = 0
     return strong[labels]
 
