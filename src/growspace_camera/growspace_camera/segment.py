@@ -38,6 +38,7 @@ FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked again
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
 _WARMTH = np.array([[-1.0, 0.0, 1.0]], np.float32)  # r - b
+_YELLOWNESS = np.array([[-4.0, 4.0, 0.0]], np.float32)  # 4 (g - b)
 
 
 @dataclass(frozen=True)
@@ -200,19 +201,15 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
         The photo as if lit evenly at its backdrop's mean grey level (float32), that level,
         and the light estimated (float32 BGR).
     """
-    backdrop = (~exclude).astype(np.float32)
+    backdrop = (~exclude).view(np.uint8)
     if not backdrop.any():
         return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
+    average = cv2.mean(bgr, backdrop)[:3]
     if not exclude.any():
         fill = bgr
     elif fill is None:
-        size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
-        weight = cv2.blur(backdrop, size)
-        fill = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
-        # Where the window holds (almost) no backdrop, the backdrop's average light stands in.
-        thin = weight < 0.05
-        fill = cv2.divide(fill, cv2.merge((np.maximum(weight, 1e-6),) * 3))
-        fill[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
+        fill = _backdrop_mean(bgr, backdrop, max(3, int(round(BACKDROP_KERNEL_M / pixel_m))),
+                              average)
     filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
     cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
     np.maximum(filled, 1, out=filled)
@@ -222,7 +219,7 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
     # post, a pot, soil), and dividing by it would make that object's noise read as colour.
     # Such a light is brightened to the floor as a whole, its colour kept (raising only its
     # dark channels would give a dark, coloured object, a blue mesh, another colour).
-    floor = LIGHT_FLOOR * float(np.mean(cv2.mean(bgr, backdrop.astype(np.uint8))[:3]))
+    floor = LIGHT_FLOOR * float(np.mean(average))
     grey = cv2.transform(light, _SUM / 3.0)
     dim = grey < floor
     if dim.any():
@@ -230,6 +227,30 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
     # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
     level = float(np.mean(cv2.mean(light)[:3]))
     return cv2.divide(bgr, light, scale=level), level, light
+
+
+def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
+                   average: tuple[float, ...]) -> np.ndarray:
+    """The mean of the ``backdrop`` (uint8 0/1) pixels of ``bgr`` over ``k`` x ``k`` pixels
+    (float32 BGR), computed on the chamber shrunk by ``MEDIAN_SHRINK`` (a smooth estimate,
+    only used where the plant may be); where a window holds (almost) no backdrop, the
+    backdrop's ``average`` light stands in."""
+    f = MEDIAN_SHRINK
+    rows, cols = backdrop.shape
+    pad_rows, pad_cols = -rows % f, -cols % f
+    weight = backdrop.astype(np.float32)
+    lit = cv2.multiply(bgr, cv2.merge((weight,) * 3))
+    if pad_rows or pad_cols:
+        weight = cv2.copyMakeBorder(weight, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+        lit = cv2.copyMakeBorder(lit, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+    size = (weight.shape[1] // f, weight.shape[0] // f)
+    kc = (max(1, int(round(k / f))) | 1,) * 2
+    weight = cv2.blur(cv2.resize(weight, size, interpolation=cv2.INTER_AREA), kc)
+    lit = cv2.blur(cv2.resize(lit, size, interpolation=cv2.INTER_AREA), kc)
+    mean = cv2.divide(lit, cv2.merge((np.maximum(weight, 1e-6),) * 3))
+    mean[weight < 0.05] = average
+    full = cv2.resize(mean, (size[0] * f, size[1] * f), interpolation=cv2.INTER_LINEAR)
+    return full[:rows, :cols]
 
 
 def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
@@ -270,28 +291,35 @@ def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     return light[:rows, :cols].astype(np.float32)
 
 
-def tissue(bgr: np.ndarray, level: float) -> np.ndarray:
+def tissue(bgr: np.ndarray, level: float, green: np.ndarray | None = None) -> np.ndarray:
     """How much each pixel of an evenly lit photo looks like plant tissue, green or brown.
 
-    Green tissue: excess green (``greenness``). Brown, woody tissue is not greener than the
-    backdrop, but it is darker and warm: red above green above blue (bark's hue, 15-50
-    degrees). Its warmth is r - b, or 4 (g - b) where that is less (a purple or magenta
-    pixel, g below b, is not bark), on chromatic coordinates whose sum carries a grey
-    level's worth of constant (``BARK_DILUTION``): the few grey levels by which the channels
-    of a black post, a pot or dark soil differ (noise, JPEG, a tint) must not make it warm.
-    Tissue counts fully once that warmth reaches ``WARM`` above ``WARM_FROM``, times its
-    darkness below the backdrop's ``level``. A neutral dark pixel (wood grain, a shadow, a
-    fold) is not warm, so it stays low.
+    Green tissue: excess green (``greenness``, or ``green`` if given). Brown, woody tissue is
+    not greener than the backdrop, but it is darker and warm: red above green above blue
+    (bark's hue, 15-50 degrees). Its warmth is r - b, or 4 (g - b) where that is less (a
+    purple or magenta pixel, g below b, is not bark), on chromatic coordinates whose sum
+    carries half a backdrop grey level of constant (``BARK_DILUTION``): the few grey levels by
+    which the channels of a black post, a pot or dark soil differ (noise, JPEG, a tint) must
+    not make it warm. Tissue counts fully once that warmth reaches ``WARM`` above
+    ``WARM_FROM``, times its darkness below the backdrop's ``level``. A neutral dark pixel
+    (wood grain, a shadow, a fold) is not warm, so it stays low. ``plant_mask`` keeps brown
+    tissue only where it joins green tissue.
     """
-    exg = greenness(bgr)
+    exg = greenness(bgr) if green is None else green
     total = cv2.transform(bgr, _SUM)
-    b, g, r = cv2.split(bgr)
-    hue_warmth = cv2.min(r - b, 4.0 * (g - b))
-    warm = cv2.divide(hue_warmth, total + BARK_DILUTION * max(level, 1.0))
-    dark = 1.0 - total / (3.0 * max(level, 1.0))
-    brown = (np.clip((warm - WARM_FROM) * (1.0 / WARM), 0.0, 1.0) * np.clip(dark, 0.0, 1.0)
-             * BROWN_WEIGHT)
-    return np.maximum(exg, brown)
+    hue_warmth = cv2.min(cv2.transform(bgr, _WARMTH), cv2.transform(bgr, _YELLOWNESS))
+    level = max(level, 1.0)
+    warm = cv2.divide(hue_warmth, total + BARK_DILUTION * level, scale=1.0 / WARM)
+    warm -= WARM_FROM / WARM
+    dark = cv2.addWeighted(total, -BROWN_WEIGHT / (3.0 * level), total, 0.0, BROWN_WEIGHT)
+    brown = cv2.multiply(_unit(warm), _unit(dark, BROWN_WEIGHT))
+    return cv2.max(exg, brown)
+
+
+def _unit(x: np.ndarray, top: float = 1.0) -> np.ndarray:
+    """``x`` clipped to [0, top] in place (a single-channel float32 image)."""
+    np.maximum(x, 0.0, out=x)
+    return np.minimum(x, top, out=x)
 
 
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
@@ -307,8 +335,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
     ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
     """
-    b, g, r = cv2.split(bgr)
-    clipped = np.count_nonzero(cv2.max(cv2.max(b, g), r) >= SATURATED) / b.size
+    brightest = cv2.reduce(bgr.reshape(-1, 3), 1, cv2.REDUCE_MAX)  # per pixel
+    clipped = np.count_nonzero(brightest >= SATURATED) / brightest.size
     if clipped > params.max_saturated:
         raise CameraError(EXPOSURE, f'the chamber is overexposed: a colour is clipped in '
                           f'{clipped:.0%} of it > max_saturated {params.max_saturated:.0%} '
@@ -330,11 +358,13 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
-    exg = tissue(flat, level)
+    green = greenness(flat)
+    exg = tissue(flat, level, green)
     # A pixel this dark in the photo has no colour to read (sensor noise, JPEG, the tint of a
     # black cabinet post): whatever the flat field makes of it, it is not tissue.
-    dim = cv2.transform(cv2.GaussianBlur(bgr, (3, 3), 0), _SUM) < 3.0 * DIM * float(balance.mean())
-    exg[dim] = np.minimum(exg[dim], 0.0)
+    grey = cv2.GaussianBlur(cv2.transform(bgr, _SUM), (3, 3), 0)
+    dim = (grey < 3.0 * DIM * float(balance.mean())).view(np.uint8)
+    cv2.copyTo(np.minimum(exg, 0.0), dim, exg)
     _floor_rows(exg, params.pixel_m)
     # Otsu splits two classes; with two plants of different greens it splits the backdrop
     # from the greener one and loses the other. Whatever stands clearly out of the
@@ -346,7 +376,7 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     low = max(0.5 * threshold, params.min_greenness)
     # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
     # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
-    mask = _hysteresis(exg, low, threshold, greenness(flat), SEED * params.min_greenness)
+    mask = _hysteresis(exg, low, threshold, green, SEED * params.min_greenness)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
