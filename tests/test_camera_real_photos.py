@@ -117,8 +117,6 @@ EXPECTED = {
 XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026-11-28)
     ('seedling_thin_leaves', 'plant', 'thin leaves'):
         f'{ITEM2}: thin, pale leaf blades and their ends fall below the threshold',
-    ('grass_drooping_leaves', 'not_plant', 'cabinet post edge'):
-        f'{ITEM2}: the colour fringe along a black cabinet post passes for green',
     ('leafy_side_view', 'outcome', ''):
         f"{ITEM3}: refused 'plants: 3 stem base(s)', two drooping leaves cross the soil line",
     ('grass_drooping_leaves', 'outcome', ''):
@@ -128,7 +126,6 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
         f'{ITEM2} and {ITEM3}: accepted (reward 0.073; {ITEM4}) with the ends of both '
         'thin left leaves lost (no tip there) and a tip at the cut base',
     ('grass_drooping_leaves', 'tips', ''): f'{ITEM3}: refused (3 stem bases), no tips to check',
-    ('woody_tree', 'tips', ''): f'{ITEM3}: accepted, with a tip at the cut base (0.425, 0.015)',
 }
 
 

@@ -24,7 +24,7 @@ BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this windo
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
 SEED = 2.0  # a region is plant only where it is this many times min_greenness green
-MEDIAN_SHRINK = 4  # the flat field's medians run on the chamber shrunk by this factor
+MEDIAN_SHRINK = 2  # the flat field's medians run on the chamber shrunk by this factor
 RATIO_SCALE = 128.0  # a photo-to-light ratio of 1 as uint8 (ratios up to 2 kept)
 DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
 LIGHT_FLOOR = 0.35  # a light darker than this part of the backdrop's mean grey is no light
@@ -255,7 +255,7 @@ def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
 
 def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     """A median of ``k`` x ``k`` pixels of a uint8 BGR image, computed on the image shrunk by
-    ``MEDIAN_SHRINK`` (float32): 10 times cheaper than at full size.
+    ``MEDIAN_SHRINK`` (float32): several times cheaper than at full size.
 
     Enlarged, the shrunk median would spread a hard lamp edge over a shrunk pixel or two (twin
     bench: IoU 0.92 -> 0.88 and refusals on hard-edged lamps). So the enlarged median is
