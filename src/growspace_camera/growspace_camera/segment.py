@@ -23,7 +23,7 @@ EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
-SEED = 2.0  # a region is plant only where it is this many times min_greenness green
+SEED_GREENNESS = 0.12  # a region is plant only where some pixel is this green (ExG), at least
 MEDIAN_SHRINK = 2  # the flat field's medians run on the chamber shrunk by this factor
 RATIO_SCALE = 128.0  # a photo-to-light ratio of 1 as uint8 (ratios up to 2 kept)
 DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
@@ -376,7 +376,7 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     low = max(0.5 * threshold, params.min_greenness)
     # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
     # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
-    mask = _hysteresis(exg, low, threshold, green, SEED * params.min_greenness)
+    mask = _hysteresis(exg, low, threshold, green, SEED_GREENNESS)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
