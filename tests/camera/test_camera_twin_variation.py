@@ -64,6 +64,9 @@ def test_combinations_are_seeded_and_never_empty():
     assert len({Variation.combination(k).factors for k in ids}) > 40
 
 
+GREEN_SHOOT = (60.0, 140.0, 70.0)
+
+
 def grey(size: int = 160, level: float = 150.0) -> np.ndarray:
     return np.full((size, size, 3), level, np.float32)
 
@@ -93,6 +96,7 @@ def test_a_hard_lamp_edge_beside_a_stem_leaves_only_the_stem():
 def test_a_brown_woody_stem_is_plant_a_neutral_dark_line_is_not(bark):
     photo = grey(level=170.0)
     photo[:, 40:48] = bark  # the woody stem, not greener than the backdrop
+    photo[:20, 42:46] = GREEN_SHOOT  # ... which carries a green shoot
     photo[:, 110:113] = 125.0  # a neutral dark line (wood grain, a fold)
     seg = plant_mask(cv2.GaussianBlur(photo, (0, 0), 0.7), SegmentParams())
     assert seg.mask[20:140, 40:48].all()
@@ -100,10 +104,25 @@ def test_a_brown_woody_stem_is_plant_a_neutral_dark_line_is_not(bark):
     assert columns.min() >= 38 and columns.max() <= 50, columns
 
 
+@pytest.mark.parametrize('post, width', [((8.0, 16.0, 24.0), 6), ((40.0, 60.0, 85.0), 6),
+                                         ((7.0, 10.0, 6.0), 30)])
+def test_a_dark_cabinet_post_is_not_plant_even_if_warm_or_tinted(post, width):
+    # As on the real photos: a dark post with a warm tint, or a black one with a green tint
+    # (sensor, JPEG) wider than the flat field's window, down to the floor. Brown counts only
+    # on a green shoot, and a black pixel has no colour to read.
+    photo = grey(level=190.0)
+    photo[:, 120:120 + width] = post
+    photo[:, 60:64] = GREEN_SHOOT
+    seg = plant_mask(cv2.GaussianBlur(photo, (0, 0), 0.7), SegmentParams())
+    assert not seg.mask[:, 100:].any(), np.argwhere(seg.mask[:, 100:])[:5]
+    assert seg.mask[:, 60:64].all()
+
+
 def test_the_soil_line_is_not_a_stem():
     photo = grey()
     photo[-2:] = (40.0, 50.0, 70.0)  # soil blurred into the chamber's bottom rows
     photo[:, 70:76] = (50.0, 76.0, 99.0)  # a woody stem down to the floor
+    photo[:20, 71:75] = GREEN_SHOOT
     seg = plant_mask(cv2.GaussianBlur(photo, (0, 0), 0.7), SegmentParams())
     assert not seg.mask[-2:, :60].any() and seg.mask[-1, 70:76].any()
 

@@ -23,14 +23,22 @@ EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
+SEED_GREENNESS = 0.12  # a region is plant only where some pixel is this green (ExG), at least
+MEDIAN_SHRINK = 2  # the flat field's medians run on the chamber shrunk by this factor
+RATIO_SCALE = 128.0  # a photo-to-light ratio of 1 as uint8 (ratios up to 2 kept)
+DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
+LIGHT_FLOOR = 0.35  # a light darker than this part of the backdrop's mean grey is no light
 FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
-WARM = 0.08  # r - b on chromatic coordinates from which a dark pixel counts fully as bark
+WARM_FROM = 0.015  # warmth (``tissue``) below which a dark pixel is not bark at all
+WARM = 0.04  # ... and from which, this much above, it counts fully as bark
+BARK_DILUTION = 0.5  # the constant in the warmth's sum, in backdrop grey levels
 BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
 FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked against those above
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
 _WARMTH = np.array([[-1.0, 0.0, 1.0]], np.float32)  # r - b
+_YELLOWNESS = np.array([[-4.0, 4.0, 0.0]], np.float32)  # 4 (g - b)
 
 
 @dataclass(frozen=True)
@@ -193,48 +201,125 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
         The photo as if lit evenly at its backdrop's mean grey level (float32), that level,
         and the light estimated (float32 BGR).
     """
-    backdrop = (~exclude).astype(np.float32)
+    backdrop = (~exclude).view(np.uint8)
     if not backdrop.any():
         return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
+    average = cv2.mean(bgr, backdrop)[:3]
     if not exclude.any():
         fill = bgr
     elif fill is None:
-        size = (max(3, int(round(BACKDROP_KERNEL_M / pixel_m)) | 1),) * 2
-        weight = cv2.blur(backdrop, size)
-        fill = cv2.blur(cv2.multiply(bgr, cv2.merge((backdrop,) * 3)), size)
-        # Where the window holds (almost) no backdrop, the backdrop's average light stands in.
-        thin = weight < 0.05
-        fill = cv2.divide(fill, cv2.merge((np.maximum(weight, 1e-6),) * 3))
-        fill[thin] = cv2.mean(bgr, backdrop.astype(np.uint8))[:3]
-    filled = np.where(exclude[..., None], fill, bgr)
-    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
-    # may hold a little soil. At full size: a median of a shrunk photo, enlarged, spreads a
-    # hard edge over a shrunk pixel or two, which showed (twin bench: shrunk by 2, IoU 0.92
-    # -> 0.88 and refusals on hard-edged lamps); the two medians cost 10-20 ms each.
-    k = max(3, int(round(edge_m / pixel_m)) | 1)
-    h = k // 2
-    padded = cv2.copyMakeBorder(np.clip(filled, 1.0, 255.0).astype(np.uint8), h, h, h, h,
-                                cv2.BORDER_REFLECT_101)
-    light = cv2.medianBlur(padded, k)[h:-h, h:-h].astype(np.float32)
+        fill = _backdrop_mean(bgr, backdrop, max(3, int(round(BACKDROP_KERNEL_M / pixel_m))),
+                              average)
+    filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
+    cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
+    np.maximum(filled, 1, out=filled)
+    light = _edge_keeping_median(filled, max(3, int(round(edge_m / pixel_m)) | 1))
+    # A backdrop is never lit this little (vignetting and a lamp's cast take a fraction of the
+    # light, not nearly all of it): a light this dark follows a wide dark object (a cabinet
+    # post, a pot, soil), and dividing by it would make that object's noise read as colour.
+    # Such a light is brightened to the floor as a whole, its colour kept (raising only its
+    # dark channels would give a dark, coloured object, a blue mesh, another colour).
+    floor = LIGHT_FLOOR * float(np.mean(average))
+    grey = cv2.transform(light, _SUM / 3.0)
+    dim = grey < floor
+    if dim.any():
+        light[dim] *= (floor / np.maximum(grey[dim], 1.0))[:, None]
     # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
     level = float(np.mean(cv2.mean(light)[:3]))
     return cv2.divide(bgr, light, scale=level), level, light
 
 
-def tissue(bgr: np.ndarray, level: float) -> np.ndarray:
+def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
+                   average: tuple[float, ...]) -> np.ndarray:
+    """The mean of the ``backdrop`` (uint8 0/1) pixels of ``bgr`` over ``k`` x ``k`` pixels
+    (float32 BGR), computed on the chamber shrunk by ``MEDIAN_SHRINK`` (a smooth estimate,
+    only used where the plant may be); where a window holds (almost) no backdrop, the
+    backdrop's ``average`` light stands in."""
+    f = MEDIAN_SHRINK
+    rows, cols = backdrop.shape
+    pad_rows, pad_cols = -rows % f, -cols % f
+    weight = backdrop.astype(np.float32)
+    lit = cv2.multiply(bgr, cv2.merge((weight,) * 3))
+    if pad_rows or pad_cols:
+        weight = cv2.copyMakeBorder(weight, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+        lit = cv2.copyMakeBorder(lit, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+    size = (weight.shape[1] // f, weight.shape[0] // f)
+    kc = (max(1, int(round(k / f))) | 1,) * 2
+    weight = cv2.blur(cv2.resize(weight, size, interpolation=cv2.INTER_AREA), kc)
+    lit = cv2.blur(cv2.resize(lit, size, interpolation=cv2.INTER_AREA), kc)
+    mean = cv2.divide(lit, cv2.merge((np.maximum(weight, 1e-6),) * 3))
+    mean[weight < 0.05] = average
+    full = cv2.resize(mean, (size[0] * f, size[1] * f), interpolation=cv2.INTER_LINEAR)
+    return full[:rows, :cols]
+
+
+def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
+    """A median of ``k`` x ``k`` pixels of a uint8 BGR image, computed on the image shrunk by
+    ``MEDIAN_SHRINK`` (float32): several times cheaper than at full size.
+
+    Enlarged, the shrunk median would spread a hard lamp edge over a shrunk pixel or two (twin
+    bench: IoU 0.92 -> 0.88 and refusals on hard-edged lamps). So the enlarged median is
+    corrected at full size by the 5 x 5 median of the image's ratio to it (a step in the image
+    is a step in the ratio, which a median keeps where it is), and the corrected value is held
+    within the range of the shrunk median over its 3 x 3 neighbourhood: where the light is
+    smooth that range is narrow, so a part of the plant that the exclusion missed is not
+    taken for light; along a lamp's edge it spans both sides of the edge.
+    """
+    f = MEDIAN_SHRINK
+    rows, cols = image.shape[:2]
+    pad_rows, pad_cols = -rows % f, -cols % f
+    if pad_rows or pad_cols:
+        image = cv2.copyMakeBorder(image, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+    size = (image.shape[1] // f, image.shape[0] // f)
+    small = cv2.resize(image, size, interpolation=cv2.INTER_NEAREST)
+    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
+    # may hold a little soil.
+    kc = max(3, int(round(k / f)) | 1)
+    h = kc // 2
+    small = cv2.medianBlur(cv2.copyMakeBorder(small, h, h, h, h, cv2.BORDER_REFLECT_101),
+                           kc)[h:-h, h:-h]
+    near = np.ones((3, 3), np.uint8)
+    full = image.shape[1::-1]
+    smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)
+    np.maximum(smooth, 1, out=smooth)
+    low = cv2.resize(cv2.erode(small, near), full, interpolation=cv2.INTER_LINEAR)
+    high = cv2.resize(cv2.dilate(small, near), full, interpolation=cv2.INTER_LINEAR)
+    # uint8 throughout (OpenCV saturates): the light to half a grey level.
+    ratio = cv2.medianBlur(cv2.divide(image, smooth, scale=RATIO_SCALE), 5)
+    light = cv2.multiply(ratio, smooth, scale=1.0 / RATIO_SCALE)
+    light = cv2.min(cv2.max(light, low), high)
+    return light[:rows, :cols].astype(np.float32)
+
+
+def tissue(bgr: np.ndarray, level: float, green: np.ndarray | None = None) -> np.ndarray:
     """How much each pixel of an evenly lit photo looks like plant tissue, green or brown.
 
-    Green tissue: excess green (``greenness``). Brown, woody tissue is not greener than the
-    backdrop, but it is darker and warmer (red above blue): its darkness below the backdrop's
-    ``level``, counted fully once its warmth (r - b on chromatic coordinates) reaches
-    ``WARM``. A neutral dark pixel (wood grain, a shadow, a fold) is not warm, so it stays low.
+    Green tissue: excess green (``greenness``, or ``green`` if given). Brown, woody tissue is
+    not greener than the backdrop, but it is darker and warm: red above green above blue
+    (bark's hue, 15-50 degrees). Its warmth is r - b, or 4 (g - b) where that is less (a
+    purple or magenta pixel, g below b, is not bark), on chromatic coordinates whose sum
+    carries half a backdrop grey level of constant (``BARK_DILUTION``): the few grey levels by
+    which the channels of a black post, a pot or dark soil differ (noise, JPEG, a tint) must
+    not make it warm. Tissue counts fully once that warmth reaches ``WARM`` above
+    ``WARM_FROM``, times its darkness below the backdrop's ``level``. A neutral dark pixel
+    (wood grain, a shadow, a fold) is not warm, so it stays low. ``plant_mask`` keeps brown
+    tissue only where it joins green tissue.
     """
-    exg = greenness(bgr)
+    exg = greenness(bgr) if green is None else green
     total = cv2.transform(bgr, _SUM)
-    warm = cv2.divide(cv2.transform(bgr, _WARMTH), total + 30.0)
-    dark = 1.0 - total / (3.0 * max(level, 1.0))
-    brown = np.clip(warm * (1.0 / WARM), 0.0, 1.0) * np.clip(dark, 0.0, 1.0) * BROWN_WEIGHT
-    return np.maximum(exg, brown)
+    hue_warmth = cv2.min(cv2.transform(bgr, _WARMTH), cv2.transform(bgr, _YELLOWNESS))
+    level = max(level, 1.0)
+    warm = cv2.divide(hue_warmth, total + BARK_DILUTION * level, scale=1.0 / WARM)
+    warm -= WARM_FROM / WARM
+    dark = cv2.addWeighted(total, -BROWN_WEIGHT / (3.0 * level), total, 0.0, BROWN_WEIGHT)
+    brown = cv2.multiply(_unit(warm), _unit(dark, BROWN_WEIGHT))
+    return cv2.max(exg, brown)
+
+
+def _unit(x: np.ndarray, top: float = 1.0) -> np.ndarray:
+    """``x`` clipped to [0, top] in place (a single-channel float32 image)."""
+    np.maximum(x, 0.0, out=x)
+    return np.minimum(x, top, out=x)
 
 
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
@@ -250,8 +335,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
     ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
     """
-    b, g, r = cv2.split(bgr)
-    clipped = np.count_nonzero(cv2.max(cv2.max(b, g), r) >= SATURATED) / b.size
+    brightest = cv2.reduce(bgr.reshape(-1, 3), 1, cv2.REDUCE_MAX)  # per pixel
+    clipped = np.count_nonzero(brightest >= SATURATED) / brightest.size
     if clipped > params.max_saturated:
         raise CameraError(EXPOSURE, f'the chamber is overexposed: a colour is clipped in '
                           f'{clipped:.0%} of it > max_saturated {params.max_saturated:.0%} '
@@ -272,7 +357,14 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     found = found > max(_otsu(found), params.min_greenness)
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
-    exg = tissue(cv2.GaussianBlur(flat, (3, 3), 0), level)
+    flat = cv2.GaussianBlur(flat, (3, 3), 0)
+    green = greenness(flat)
+    exg = tissue(flat, level, green)
+    # A pixel this dark in the photo has no colour to read (sensor noise, JPEG, the tint of a
+    # black cabinet post): whatever the flat field makes of it, it is not tissue.
+    grey = cv2.GaussianBlur(cv2.transform(bgr, _SUM), (3, 3), 0)
+    dim = (grey < 3.0 * DIM * float(balance.mean())).view(np.uint8)
+    cv2.copyTo(np.minimum(exg, 0.0), dim, exg)
     _floor_rows(exg, params.pixel_m)
     # Otsu splits two classes; with two plants of different greens it splits the backdrop
     # from the greener one and loses the other. Whatever stands clearly out of the
@@ -282,7 +374,9 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
     threshold = max(min(_otsu(exg), centre + NOISE_SIGMAS * noise), params.min_greenness)
     low = max(0.5 * threshold, params.min_greenness)
-    mask = _hysteresis(exg, low, threshold)
+    # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
+    # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
+    mask = _hysteresis(exg, low, threshold, green, SEED_GREENNESS)
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
@@ -332,13 +426,18 @@ def _coverage(exg: np.ndarray, plant: np.ndarray, backdrop: float) -> np.ndarray
     return cover
 
 
-def _hysteresis(exg: np.ndarray, low: float, high: float) -> np.ndarray:
+def _hysteresis(exg: np.ndarray, low: float, high: float,
+                seeds: np.ndarray | None = None, seed_level: float = 0.0) -> np.ndarray:
     """Pixels above ``low`` that join (4-connected) a pixel above ``high``, uint8 0/1: the
     hysteresis threshold of scikit-image's ``apply_hysteresis_threshold``, on OpenCV's
-    connected components (several times faster on a chamber of mostly backdrop)."""
+    connected components (several times faster on a chamber of mostly backdrop). With
+    ``seeds``, the pixels above ``high`` must be above it and ``seed_level`` in ``seeds`` too."""
     count, labels = cv2.connectedComponents((exg > low).view(np.uint8), connectivity=4)
     strong = np.zeros(count, np.uint8)
-    strong[labels[exg > high]] = 1
+    high_px = exg > high
+    if seeds is not None:
+        high_px &= seeds > max(high, seed_level)
+    strong[labels[high_px]] = 1
     strong[0] = 0
     return strong[labels]
 
