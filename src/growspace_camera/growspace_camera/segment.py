@@ -354,7 +354,7 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     # what the first found left out.
     flat, level, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
     found = tissue(flat, level)
-    found = found > max(_otsu(found), params.min_greenness)
+    found = found > _plant_threshold(found, params.min_greenness)
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
@@ -366,13 +366,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     dim = (grey < 3.0 * DIM * float(balance.mean())).view(np.uint8)
     cv2.copyTo(np.minimum(exg, 0.0), dim, exg)
     _floor_rows(exg, params.pixel_m)
-    # Otsu splits two classes; with two plants of different greens it splits the backdrop
-    # from the greener one and loses the other. Whatever stands clearly out of the
-    # backdrop's own noise is plant, so the threshold never exceeds that level.
-    sample = exg[::3, ::3]
-    centre = float(np.median(sample))
-    noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
-    threshold = max(min(_otsu(exg), centre + NOISE_SIGMAS * noise), params.min_greenness)
+    centre = float(np.median(exg[::3, ::3]))
+    threshold = _plant_threshold(exg, params.min_greenness)
     low = max(0.5 * threshold, params.min_greenness)
     # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
     # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
@@ -440,6 +435,23 @@ def _hysteresis(exg: np.ndarray, low: float, high: float,
     strong[labels[high_px]] = 1
     strong[0] = 0
     return strong[labels]
+
+
+def _plant_threshold(index: np.ndarray, floor: float) -> float:
+    """Otsu's threshold of a greenness index, capped where it stands clearly out of the
+    backdrop's noise, and never below ``floor``.
+
+    Otsu splits two classes; with two greens (a dark old stem under bright young shoots, or
+    two plants) it splits the backdrop from the brighter one and loses the other. That
+    matters after the wide flat field too: a dark trunk it misses is not left out of the
+    narrow one, whose median then takes the trunk for light and divides it away (a fairness
+    twin photo lost its left plant's trunk so). Not before any flat field: there the part
+    of the backdrop the lamp misses stands out of the noise as green.
+    """
+    sample = index[::3, ::3]
+    centre = float(np.median(sample))
+    noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
+    return max(min(_otsu(index), centre + NOISE_SIGMAS * noise), floor)
 
 
 def _otsu(exg: np.ndarray) -> float:
