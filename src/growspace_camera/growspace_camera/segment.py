@@ -2,11 +2,11 @@
 
 Each step is a plain function of arrays (PlantCV's way): ``exposure`` reads the photo's grey
 levels, ``rectify`` warps the chamber square of the photo to a top-left-origin grid of the
-plane (``Grid``), ``flat_field`` divides out the light falling on the backdrop (the grow lamp's
-coloured cast, vignetting), ``greenness`` is the excess-green index ExG = 2g - r - b on
-chromatic coordinates (Woebbecke et al. 1995), and ``plant_mask`` thresholds it with Otsu's
-method, floored so that a plant-free photo stays empty, then cleans the mask up.
-"""
+plane (``Grid``), ``flatfield.flat_field`` divides out the light falling on the backdrop (the
+grow lamp's coloured cast, vignetting), ``greenness`` is the excess-green index
+ExG = 2g - r - b on chromatic coordinates (Woebbecke et al. 1995), and ``plant_mask``
+thresholds it with Otsu's method, floored so that a plant-free photo stays empty, then cleans
+the mask up."""
 
 from __future__ import annotations
 
@@ -17,17 +17,13 @@ import numpy as np
 
 from growspace_camera.calibration import PlaneFit
 from growspace_camera.errors import CameraError, EXPOSURE
+from growspace_camera.flatfield import flat_field
 
 SATURATED = 250  # grey level from which a pixel counts as clipped
 EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
-BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
-EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
 SEED_GREENNESS = 0.12  # a region is plant only where some pixel is this green (ExG), at least
-MEDIAN_SHRINK = 2  # the flat field's medians run on the chamber shrunk by this factor
-RATIO_SCALE = 128.0  # a photo-to-light ratio of 1 as uint8 (ratios up to 2 kept)
 DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
-LIGHT_FLOOR = 0.35  # a light darker than this part of the backdrop's mean grey is no light
 FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
 WARM_FROM = 0.015  # warmth (``tissue``) below which a dark pixel is not bark at all
@@ -174,121 +170,6 @@ def greenness(bgr: np.ndarray) -> np.ndarray:
     total = cv2.transform(bgr, _SUM)
     total += 30.0
     return cv2.divide(cv2.transform(bgr, _EXCESS_GREEN), total)
-
-
-def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
-               edge_m: float = EDGE_KERNEL_M,
-               fill: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
-    """Divide out the light falling on the backdrop, estimated away from the plant.
-
-    The backdrop is neutral and everywhere behind the plant, so its local colour is the local
-    light (the white photo light, the grow lamp's cast where it falls, vignetting). A mean
-    over a window that straddles a lamp's hard edge (an LED bar's cut-off) would mix the
-    light of both sides and leave a coloured line along the edge, which reads as a stem; so
-    the light is the median of the backdrop over a window of ``edge_m`` (a median keeps a
-    step where it is), with the pixels that may be plant first filled in from ``fill`` (an
-    earlier estimate of the light) or a wide mean of the backdrop around them.
-
-    Args:
-        bgr: (rows, cols, 3) float32 rectified photo.
-        exclude: (rows, cols) bool, pixels that may be plant (left out of the estimate).
-        pixel_m: Grid pixel [m].
-        edge_m: Side of the median window [m]: lamp bands narrower than half of it, and
-            plant parts wider than half of it that ``exclude`` misses, are not followed.
-        fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
-
-    Returns:
-        The photo as if lit evenly at its backdrop's mean grey level (float32), that level,
-        and the light estimated (float32 BGR).
-    """
-    backdrop = (~exclude).view(np.uint8)
-    if not backdrop.any():
-        return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
-    average = cv2.mean(bgr, backdrop)[:3]
-    if not exclude.any():
-        fill = bgr
-    elif fill is None:
-        fill = _backdrop_mean(bgr, backdrop, max(3, int(round(BACKDROP_KERNEL_M / pixel_m))),
-                              average)
-    filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
-    cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
-    np.maximum(filled, 1, out=filled)
-    light = _edge_keeping_median(filled, max(3, int(round(edge_m / pixel_m)) | 1))
-    # A backdrop is never lit this little (vignetting and a lamp's cast take a fraction of the
-    # light, not nearly all of it): a light this dark follows a wide dark object (a cabinet
-    # post, a pot, soil), and dividing by it would make that object's noise read as colour.
-    # Such a light is brightened to the floor as a whole, its colour kept (raising only its
-    # dark channels would give a dark, coloured object, a blue mesh, another colour).
-    floor = LIGHT_FLOOR * float(np.mean(average))
-    grey = cv2.transform(light, _SUM / 3.0)
-    dim = grey < floor
-    if dim.any():
-        light[dim] *= (floor / np.maximum(grey[dim], 1.0))[:, None]
-    # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
-    level = float(np.mean(cv2.mean(light)[:3]))
-    return cv2.divide(bgr, light, scale=level), level, light
-
-
-def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
-                   average: tuple[float, ...]) -> np.ndarray:
-    """The mean of the ``backdrop`` (uint8 0/1) pixels of ``bgr`` over ``k`` x ``k`` pixels
-    (float32 BGR), computed on the chamber shrunk by ``MEDIAN_SHRINK`` (a smooth estimate,
-    only used where the plant may be); where a window holds (almost) no backdrop, the
-    backdrop's ``average`` light stands in."""
-    f = MEDIAN_SHRINK
-    rows, cols = backdrop.shape
-    pad_rows, pad_cols = -rows % f, -cols % f
-    weight = backdrop.astype(np.float32)
-    lit = cv2.multiply(bgr, cv2.merge((weight,) * 3))
-    if pad_rows or pad_cols:
-        weight = cv2.copyMakeBorder(weight, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-        lit = cv2.copyMakeBorder(lit, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-    size = (weight.shape[1] // f, weight.shape[0] // f)
-    kc = (max(1, int(round(k / f))) | 1,) * 2
-    weight = cv2.blur(cv2.resize(weight, size, interpolation=cv2.INTER_AREA), kc)
-    lit = cv2.blur(cv2.resize(lit, size, interpolation=cv2.INTER_AREA), kc)
-    mean = cv2.divide(lit, cv2.merge((np.maximum(weight, 1e-6),) * 3))
-    mean[weight < 0.05] = average
-    full = cv2.resize(mean, (size[0] * f, size[1] * f), interpolation=cv2.INTER_LINEAR)
-    return full[:rows, :cols]
-
-
-def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
-    """A median of ``k`` x ``k`` pixels of a uint8 BGR image, computed on the image shrunk by
-    ``MEDIAN_SHRINK`` (float32): several times cheaper than at full size.
-
-    Enlarged, the shrunk median would spread a hard lamp edge over a shrunk pixel or two (twin
-    bench: IoU 0.92 -> 0.88 and refusals on hard-edged lamps). So the enlarged median is
-    corrected at full size by the 5 x 5 median of the image's ratio to it (a step in the image
-    is a step in the ratio, which a median keeps where it is), and the corrected value is held
-    within the range of the shrunk median over its 3 x 3 neighbourhood: where the light is
-    smooth that range is narrow, so a part of the plant that the exclusion missed is not
-    taken for light; along a lamp's edge it spans both sides of the edge.
-    """
-    f = MEDIAN_SHRINK
-    rows, cols = image.shape[:2]
-    pad_rows, pad_cols = -rows % f, -cols % f
-    if pad_rows or pad_cols:
-        image = cv2.copyMakeBorder(image, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-    size = (image.shape[1] // f, image.shape[0] // f)
-    small = cv2.resize(image, size, interpolation=cv2.INTER_NEAREST)
-    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
-    # may hold a little soil.
-    kc = max(3, int(round(k / f)) | 1)
-    h = kc // 2
-    small = cv2.medianBlur(cv2.copyMakeBorder(small, h, h, h, h, cv2.BORDER_REFLECT_101),
-                           kc)[h:-h, h:-h]
-    near = np.ones((3, 3), np.uint8)
-    full = image.shape[1::-1]
-    smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)
-    np.maximum(smooth, 1, out=smooth)
-    low = cv2.resize(cv2.erode(small, near), full, interpolation=cv2.INTER_LINEAR)
-    high = cv2.resize(cv2.dilate(small, near), full, interpolation=cv2.INTER_LINEAR)
-    # uint8 throughout (OpenCV saturates): the light to half a grey level.
-    ratio = cv2.medianBlur(cv2.divide(image, smooth, scale=RATIO_SCALE), 5)
-    light = cv2.multiply(ratio, smooth, scale=1.0 / RATIO_SCALE)
-    light = cv2.min(cv2.max(light, low), high)
-    return light[:rows, :cols].astype(np.float32)
 
 
 def tissue(bgr: np.ndarray, level: float, green: np.ndarray | None = None) -> np.ndarray:
