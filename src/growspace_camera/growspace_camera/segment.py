@@ -235,7 +235,11 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     # what the first found left out.
     flat, level, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
     found = tissue(flat, level)
-    found = found > _plant_threshold(found, params.min_greenness)
+    # Half of Otsu's: a dark old trunk under bright young shoots (about half as green) must
+    # be left out of the narrow flat field, which would take it for light and divide it away;
+    # the noise level alone would take in the faint line along a lamp's edge, which the
+    # narrow field exists to follow.
+    found = found > max(0.5 * _otsu(found), _plant_threshold(found, params.min_greenness))
     rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
@@ -323,11 +327,7 @@ def _plant_threshold(index: np.ndarray, floor: float) -> float:
     backdrop's noise, and never below ``floor``.
 
     Otsu splits two classes; with two greens (a dark old stem under bright young shoots, or
-    two plants) it splits the backdrop from the brighter one and loses the other. That
-    matters after the wide flat field too: a dark trunk it misses is not left out of the
-    narrow one, whose median then takes the trunk for light and divides it away (a fairness
-    twin photo lost its left plant's trunk so). Not before any flat field: there the part
-    of the backdrop the lamp misses stands out of the noise as green.
+    two plants) it splits the backdrop from the brighter one and loses the other.
     """
     sample = index[::3, ::3]
     centre = float(np.median(sample))
