@@ -3,7 +3,6 @@ hard lamp edges, brown woody stems, textured backdrops. Files and arrays only.""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -14,8 +13,7 @@ from growspace_camera.measure import Target
 from growspace_camera.pipeline import Pipeline
 from growspace_camera.segment import plant_mask, SegmentParams
 from growspace_camera.twin import FACTORS, HELD_OUT_FIRST, PhotoTwin, Variation
-from growspace_sim.core.config import SimConfig
-from growspace_sim.simulation import Simulation
+from test_camera_vision import grown_by_oracle
 
 LAYOUT = MarkerLayout()
 
@@ -23,14 +21,7 @@ LAYOUT = MarkerLayout()
 @pytest.fixture(scope='module')
 def chamber():
     """A fairness chamber (two plants) grown 24 steps by its oracle."""
-    cfg = SimConfig(challenge='fairness', setting='hard')
-    sim = Simulation(cfg)
-    sim.reset(seed=5)
-    oracle = cfg.task.oracle()
-    for _ in range(24):
-        sim.apply_discrete(oracle.act(sim.chamber))
-        outcome = sim.step()
-    return SimpleNamespace(sim=sim, cfg=cfg, reward=outcome.reward)
+    return grown_by_oracle('fairness', 'hard', seed=5, steps=24)
 
 
 def test_a_factor_changes_its_own_draws_only(chamber):

@@ -31,17 +31,22 @@ from growspace_sim.simulation import Simulation
 LAYOUT = MarkerLayout()
 
 
-@pytest.fixture(scope='module')
-def chamber():
-    """A control chamber grown 12 steps by its oracle (module-wide: photos only read it)."""
-    cfg = SimConfig(challenge='control', setting='hard')
+def grown_by_oracle(challenge: str, setting: str, seed: int, steps: int) -> SimpleNamespace:
+    """A chamber grown ``steps`` steps by its task's oracle: its sim, config and last reward."""
+    cfg = SimConfig(challenge=challenge, setting=setting)
     sim = Simulation(cfg)
-    sim.reset(seed=11)
+    sim.reset(seed=seed)
     oracle = cfg.task.oracle()
-    for _ in range(12):
+    for _ in range(steps):
         sim.apply_discrete(oracle.act(sim.chamber))
         outcome = sim.step()
     return SimpleNamespace(sim=sim, cfg=cfg, reward=outcome.reward)
+
+
+@pytest.fixture(scope='module')
+def chamber():
+    """A control chamber grown 12 steps by its oracle (module-wide: photos only read it)."""
+    return grown_by_oracle('control', 'hard', seed=11, steps=12)
 
 
 @pytest.fixture(scope='module')
