@@ -62,10 +62,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 
 import cv2
 import numpy as np
@@ -122,47 +124,64 @@ def conditions(factor_episodes: int, combinations: str,
 
 def fidelity(episodes: int, twin: PhotoTwin, steps: tuple[int, ...] = PHOTO_STEPS,
              factor_episodes: int = 1, combinations: str = 'held_out',
-             factors: tuple[str, ...] = tuple(FACTORS)) -> list[dict]:
+             factors: tuple[str, ...] = tuple(FACTORS), jobs: int = 1) -> list[dict]:
     """Rows per photo and condition (``conditions``): each simulated photo step is
     photographed once per condition with the same photo seed, each condition measured by its
     own ``Pipeline`` per episode; a varied photo's rig (camera pose, the factors' values) is
-    the episode's (``rig_seed``), as a rig's is."""
+    the episode's (``rig_seed``), as a rig's is. Episodes run in ``jobs`` processes; every
+    draw is seeded, so the rows are the same for any number."""
+    work = [(challenge, setting, e, twin, steps, factor_episodes, combinations, factors)
+            for challenge in CHALLENGES for setting in ('easy', 'hard') for e in range(episodes)]
+    return [row for rows in _map(_fidelity_episode, work, jobs) for row in rows]
+
+
+def _fidelity_episode(challenge: str, setting: str, e: int, twin: PhotoTwin,
+                      steps: tuple[int, ...], factor_episodes: int, combinations: str,
+                      factors: tuple[str, ...]) -> list[dict]:
     rows = []
     variations = conditions(factor_episodes, combinations, factors)
-    for challenge in CHALLENGES:
-        for setting in ('easy', 'hard'):
-            cfg = SimConfig(challenge=challenge, setting=setting)
-            sim = Simulation(cfg)
-            for e in range(episodes):
-                seed = 1000 + e
-                sim.reset(seed=seed)
-                rng = np.random.default_rng(seed)
-                oracle = cfg.task.oracle() if e % 2 == 0 else None
-                pipes = {name: Pipeline(PipelineParamsDefault) for name in variations}
-                actions = 7 if cfg.uses_spotlight else 5
-                for step in range(1, cfg.episode_length + 1):
-                    action = oracle.act(sim.chamber) if oracle else int(rng.integers(actions))
-                    sim.apply_discrete(action)
-                    outcome = sim.step()
-                    if step not in steps:
-                        continue
-                    floor = {}
-                    for sigma_mm in FLOOR_MM:
-                        floor[f'floor_iou_{sigma_mm}mm'], floor[f'floor_exact_{sigma_mm}mm'] = \
-                            _moved_iou(sim, sigma_mm * 1e-3, seed * 100 + step)
-                    for name, variation_of in variations.items():
-                        variation = variation_of(challenge, setting, e, seed, step)
-                        if variation is None:
-                            continue
-                        photo = twin.photo(sim.chamber, seed=seed * 100 + step,
-                                           variation=variation, rig_seed=seed)
-                        m = pipes[name].measure(photo.bgr, cfg, sim.chamber.light.copy(),
-                                                target_of(sim), sim.chamber.steps)
-                        row = _compare(challenge, setting, seed, step, sim, outcome, m)
-                        row.update(floor, condition=name,
-                                   factors=' '.join(sorted(variation.factors)))
-                        rows.append(row)
+    cfg = SimConfig(challenge=challenge, setting=setting)
+    sim = Simulation(cfg)
+    seed = 1000 + e
+    sim.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    oracle = cfg.task.oracle() if e % 2 == 0 else None
+    pipes = {name: Pipeline(PipelineParamsDefault) for name in variations}
+    actions = 7 if cfg.uses_spotlight else 5
+    for step in range(1, cfg.episode_length + 1):
+        action = oracle.act(sim.chamber) if oracle else int(rng.integers(actions))
+        sim.apply_discrete(action)
+        outcome = sim.step()
+        if step not in steps:
+            continue
+        floor = {}
+        for sigma_mm in FLOOR_MM:
+            floor[f'floor_iou_{sigma_mm}mm'], floor[f'floor_exact_{sigma_mm}mm'] = \
+                _moved_iou(sim, sigma_mm * 1e-3, seed * 100 + step)
+        for name, variation_of in variations.items():
+            variation = variation_of(challenge, setting, e, seed, step)
+            if variation is None:
+                continue
+            photo = twin.photo(sim.chamber, seed=seed * 100 + step,
+                               variation=variation, rig_seed=seed)
+            m = pipes[name].measure(photo.bgr, cfg, sim.chamber.light.copy(),
+                                    target_of(sim), sim.chamber.steps)
+            row = _compare(challenge, setting, seed, step, sim, outcome, m)
+            row.update(floor, condition=name, factors=' '.join(sorted(variation.factors)))
+            rows.append(row)
     return rows
+
+
+def _map(function: Callable, work: list[tuple], jobs: int) -> list:
+    """``function(*args)`` for each ``args`` of ``work``, in order, in ``jobs`` processes
+    (one: in this one). Each process runs OpenCV on one thread: the processes are the
+    parallelism. Spawned, not forked: a child forked from a process whose OpenCV thread pool
+    has started can wait for ever on a lock it inherited."""
+    if jobs <= 1:
+        return [function(*args) for args in work]
+    with ProcessPoolExecutor(jobs, multiprocessing.get_context('spawn'),
+                             initializer=cv2.setNumThreads, initargs=(1,)) as pool:
+        return list(pool.map(function, *zip(*work)))
 
 
 def _moved_iou(sim: Simulation, sigma_m: float, seed: int) -> tuple[float, float]:
@@ -248,8 +267,8 @@ def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation
     return row
 
 
-def closed_loop(episodes: int, twin: PhotoTwin,
-                combinations: str | None = None) -> dict[str, dict[str, float]]:
+def closed_loop(episodes: int, twin: PhotoTwin, combinations: str | None = None,
+                jobs: int = 1) -> dict[str, dict[str, float]]:
     """Per challenge: mean return of the privileged oracle, of the same oracle on the
     simulator's plants (``sim_view``) and on the camera's measurement (``camera``): of the
     old twin's photos, or with ``combinations`` (tuning or held_out) each photo with its own
@@ -259,20 +278,21 @@ def closed_loop(episodes: int, twin: PhotoTwin,
     for ci, challenge in enumerate(CHALLENGES):
         returns = {'privileged': [], 'sim_view': [], 'camera': [], 'camera_estimate': []}
         refused = 0
+        work = []
         for e in range(episodes):
             setting = ('easy', 'hard')[e % 2]
-            cfg = SimConfig(challenge=challenge, setting=setting)
-            seed = 2000 + e
             variation = None
             if combinations is not None:
                 first = 500_000 + (HELD_OUT_FIRST if combinations == 'held_out' else 0)
                 variation = Variation.combination(first + ci * 1000 + e)
-            for mode in ('privileged', 'sim_view', 'camera'):
-                total, estimate, misses = _loop_episode(cfg, seed, mode, twin, variation)
-                returns[mode].append(total)
-                refused += misses
-                if mode == 'camera':
-                    returns['camera_estimate'].append(estimate)
+            work += [(SimConfig(challenge=challenge, setting=setting), 2000 + e, mode, twin,
+                      variation) for mode in ('privileged', 'sim_view', 'camera')]
+        for (*_, mode, _, _), (total, estimate, misses) in zip(
+                work, _map(_loop_episode, work, jobs)):
+            returns[mode].append(total)
+            refused += misses
+            if mode == 'camera':
+                returns['camera_estimate'].append(estimate)
         means = {k: float(np.mean(v)) for k, v in returns.items()}
         means['ratio'] = means['camera'] / means['sim_view'] if means['sim_view'] else 0.0
         means['refused'] = refused
@@ -440,6 +460,9 @@ def main(argv: list[str] | None = None) -> int:
                         'episodes, 10 speed photos')
     parser.add_argument('--only-speed', action='store_true', help='skip fidelity and loop')
     parser.add_argument('--json', help='write every figure here')
+    parser.add_argument('--jobs', type=int, default=1,
+                        help='processes for fidelity and the closed loops (the figures are '
+                        'the same for any number; speed is always measured on one core)')
     args = parser.parse_args(argv)
     steps = PHOTO_STEPS
     if args.quick:
@@ -456,7 +479,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f'--factors: unknown {unknown}; known: {",".join(FACTORS)}')
     all_rows = fidelity(args.episodes, twin, steps, args.factor_episodes, args.combinations,
-                        factors)
+                        factors, args.jobs)
     rows = [r for r in all_rows if r['condition'] == 'old_twin']
     varied = [r for r in all_rows if r['condition'] == args.combinations]
     refused = [r for r in rows if not r['ok']]
@@ -484,9 +507,9 @@ def main(argv: list[str] | None = None) -> int:
     for key, n in sorted(reasons.items(), key=lambda kv: -kv[1]):
         print(f'  refused x{n}: {key}')
     _print_factors(all_rows)
-    loop = closed_loop(args.loop_episodes, twin) if args.loop_episodes else {}
+    loop = closed_loop(args.loop_episodes, twin, jobs=args.jobs) if args.loop_episodes else {}
     _print_loop(loop, 'old twin')
-    loop_varied = closed_loop(args.loop_episodes_varied, twin, args.combinations) \
+    loop_varied = closed_loop(args.loop_episodes_varied, twin, args.combinations, args.jobs) \
         if args.loop_episodes_varied else {}
     _print_loop(loop_varied, args.combinations)
     split = speed(args.speed_photos, twin)

@@ -224,7 +224,7 @@ def test_a_plant_photo_is_measured_and_anything_else_refused_naming_the_plant(ph
 def test_tips_are_at_shoot_and_leaf_ends_not_at_the_base(photo):
     m, e = measured(photo), EXPECTED[photo]
     assert m.ok, m.error
-    seen = m.tree.nodes[m.tree.tips]
+    seen = np.vstack((m.tree.nodes[m.tree.tips], m.tree.leaf_tips))  # shoots' and leaves'
     missed = [t for t in e.tips if np.hypot(*(seen - t).T).min() > TIP_M]
     assert not missed, f'no tip within {TIP_M} m of {missed}; tips {np.round(seen, 3)}'
     at_foot = seen[np.hypot(*(seen - e.foot).T) < FOOT_M]

@@ -95,6 +95,21 @@ def test_a_brown_woody_stem_is_plant_a_neutral_dark_line_is_not(bark):
     assert columns.min() >= 38 and columns.max() <= 50, columns
 
 
+@pytest.mark.parametrize('bark', [(38.0, 47.0, 60.0), (24.0, 43.0, 64.0)])
+def test_a_wide_brown_trunk_is_plant_down_to_the_floor(bark):
+    # A woody trunk tapering from 8 cm at the floor (wider than half the first flat field's
+    # 12 cm window, which took it for light and divided it away: the plant floated) to 2.5 cm
+    # where its green shoot goes on.
+    photo = grey(level=150.0)
+    for row in range(40, 160):
+        half = int(round(5 + 11 * (row - 40) / 120))
+        photo[row, 80 - half:80 + half] = bark
+    photo[:40, 76:84] = GREEN_SHOOT
+    seg = plant_mask(cv2.GaussianBlur(photo, (0, 0), 0.7), SegmentParams())
+    assert seg.mask[150:158, 68:92].all(), np.count_nonzero(seg.mask[150:158, 68:92])
+    assert not seg.mask[:, :55].any() and not seg.mask[:, 105:].any()
+
+
 @pytest.mark.parametrize('post, width', [((8.0, 16.0, 24.0), 6), ((40.0, 60.0, 85.0), 6),
                                          ((7.0, 10.0, 6.0), 30)])
 def test_a_dark_cabinet_post_is_not_plant_even_if_warm_or_tinted(post, width):

@@ -12,7 +12,7 @@ the local radius.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -40,6 +40,8 @@ class PlantTree:
         skeleton_px: Skeleton pixels per plant (its length in pixels, roughly).
         unattached_px: Skeleton pixels that no stem base reaches (loose bits of plant).
         unexplained_px: Mask pixels in pieces of the mask that hold no stem base.
+        leaf_tips: (L, 2) float64 ends of the leaves cut off the shoots (x, z) [m]: not
+            tips of the simulator's kind, so no reward counts them (``leaves``).
     """
 
     nodes: np.ndarray
@@ -51,6 +53,7 @@ class PlantTree:
     skeleton_px: tuple[int, ...]
     unattached_px: int
     unexplained_px: int = 0
+    leaf_tips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
@@ -86,7 +89,8 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
     return PlantTree(np.array(builder.nodes, np.float64).reshape(-1, 2),
                      np.array(builder.parent, np.int32), plant,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
-                     tuple(int(v) for v in lengths), g.unattached, g.unexplained)
+                     tuple(int(v) for v in lengths), g.unattached, g.unexplained,
+                     g.xz[g.leaf_ends].reshape(-1, 2))
 
 
 def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.ndarray:

@@ -67,6 +67,7 @@ class Confidence:
         unexplained: Fraction of the plant mask in pieces that hold no stem base [0-1].
         tips: Tips measured.
         tips_pruned: Skeleton end points dropped as spurs.
+        leaves: Leaves cut off the shoots (their ends are not tips).
     """
 
     markers_seen: tuple[int, ...] = ()
@@ -84,6 +85,7 @@ class Confidence:
     unexplained: float = float('nan')
     tips: int = 0
     tips_pruned: int = 0
+    leaves: int = 0
 
 
 @dataclass
@@ -184,6 +186,7 @@ class Pipeline:
                                        cfg.branch_length_m, p.tree, seg.coverage)
         c.skeleton_px, c.unattached_px = tree.skeleton_px, tree.unattached_px
         c.tips, c.tips_pruned = int(tree.tips.size), tree.tips_pruned
+        c.leaves = len(tree.leaf_tips)
         c.unexplained = tree.unexplained_px / max(c.plant_pixels, 1)
         clock.lap('skeleton')
         check_explained(tree, c.plant_pixels, p.max_unexplained)
@@ -237,7 +240,8 @@ def check_photo(photo: object) -> None:
 
 
 def overlay(photo: np.ndarray, measurement: Measurement, scale: float = 0.5) -> np.ndarray:
-    """The segmentation picture for people: the mask in green, markers outlined, tips red.
+    """The segmentation picture for people: the mask in green, markers outlined, tips red and
+    the ends of the leaves cut off the shoots yellow.
 
     Args:
         photo: The measured photo (BGR).
@@ -256,9 +260,11 @@ def overlay(photo: np.ndarray, measurement: Measurement, scale: float = 0.5) -> 
         r, c = pixels[inside, 1].astype(int), pixels[inside, 0].astype(int)
         picture[r, c] = (0.4 * picture[r, c] + (0, 153, 0)).astype(np.uint8)
         tree = measurement.tree
-        if tree is not None and tree.tips.size:
-            for x, y in fit.fit.photo_points(tree.nodes[tree.tips]) * scale:
-                cv2.circle(picture, (int(x), int(y)), 4, (0, 0, 255), 2)
+        for points, colour in (() if tree is None else
+                               ((tree.nodes[tree.tips], (0, 0, 255)),
+                                (tree.leaf_tips, (0, 255, 255)))):
+            for x, y in fit.fit.photo_points(points) * scale if len(points) else ():
+                cv2.circle(picture, (int(x), int(y)), 4, colour, 2)
     for d in measurement.detections:
         cv2.polylines(picture, [np.rint(d.corners * scale).astype(np.int32)], True,
                       (255, 0, 255), 2)

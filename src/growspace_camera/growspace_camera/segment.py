@@ -228,7 +228,11 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     gain = float(balance.mean()) / np.maximum(balance, 1.0)
     bgr = cv2.multiply(bgr, (*gain.tolist(), 0.0))
     first = greenness(bgr)
-    rough = (first > max(_otsu(first), params.min_greenness)).view(np.uint8)
+    rough = first > max(_otsu(first), params.min_greenness)
+    # Bark too: a trunk that is wide low down (wider than half the flat field's window) and
+    # brown, which greenness misses, would otherwise be taken for the light and divided away.
+    bark = tissue(bgr, float(balance.mean()), np.zeros_like(first))
+    rough = (rough | (bark > max(_otsu(bark), params.min_greenness))).view(np.uint8)
     rough = _without_floods(cv2.dilate(rough, np.ones((5, 5), np.uint8)).view(bool))
     # Two passes: a wide median first (a thick brown trunk, which greenness missed, is less
     # than half of its window), then a narrower one, which follows closer lamp bands, with

@@ -89,6 +89,11 @@ class CameraParams:
     max_base_tilt_deg: float = param(35.0, 'plant reaching the floor is a stem base only if it '
                                      'rises within this angle of vertical (else a leaf)',
                                      unit='deg', bounds=Bounds(0.0, 90.0))
+    leaf_widening: float = param(1.5, 'an end branch widening to this many times its narrowest '
+                                 'radius ends in a leaf, cut off its shoot', unit='1',
+                                 bounds=Bounds(0.0, 10.0), rule='0 = no leaves are cut')
+    petiole_m: float = param(0.025, 'a shoot left shorter than this by a leaf cut is a '
+                             'petiole: all leaf', unit='m', bounds=Bounds(0.0, 0.5))
     max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',
                                    unit='m', bounds=Bounds(0.0001, 0.1))
     max_unexplained: float = param(0.5, 'largest share of the plant mask in pieces that hold '

@@ -25,6 +25,7 @@ from scipy.sparse.csgraph import dijkstra
 from skimage.morphology import skeletonize
 
 from growspace_camera.errors import CameraError, NO_PLANT
+from growspace_camera.leaves import cut_leaves
 from growspace_camera.segment import Grid
 
 NEIGHBOURS = ((0, 1, 1.0), (1, -1, np.sqrt(2.0)), (1, 0, 1.0), (1, 1, np.sqrt(2.0)))
@@ -49,6 +50,10 @@ class TreeParams:
             simulator's first stem is vertical, and a leaf drooping across the soil line or a
             branch lying on it meets it at a slant. (A leaf hanging steeply is told apart by
             having no tip of its own: see ``skeleton_graph``.)
+        leaf_widening: An end branch that widens to this many times its narrowest radius
+            ends in a leaf, cut off its shoot (``leaves``); 0: no leaves are cut.
+        petiole_m: A shoot left shorter than this by cutting its leaf off is a petiole: all
+            leaf [m].
     """
 
     base_band_m: float = 0.03
@@ -58,6 +63,8 @@ class TreeParams:
     corner_deg: float = 15.0
     min_stem_m: float = 0.05
     max_base_tilt_deg: float = 35.0
+    leaf_widening: float = 1.5
+    petiole_m: float = 0.025
 
 
 @dataclass
@@ -75,6 +82,7 @@ class SkeletonGraph:
         junction: (n,) bool, three or more branches meet (after spur pruning).
         removed: (n,) bool, pixel of a pruned spur.
         ends: Kept end points (the tips), in path order.
+        leaf_ends: End points of the leaves cut off (``leaves``).
         roots: (P,) the base pixel of each plant, left to right.
         root_x: (P,) each stem's x on the floor [m].
         pruned: Spurs pruned.
@@ -93,6 +101,7 @@ class SkeletonGraph:
     junction: np.ndarray
     removed: np.ndarray
     ends: list[int]
+    leaf_ends: list[int]
     roots: np.ndarray
     root_x: np.ndarray
     pruned: int
@@ -170,13 +179,20 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         base = (group >= 0) & np.isin(group, group[roots])
         removed, ends, pruned = _prune(order, pred, arc, degree, radius, roots, base,
                                        max(params.spur_m / grid.pixel_m, 1.0), params)
+        branching = degree >= 3
+        branching[roots] = True
+        # (a stem pressed against the chamber's wall is as wide as it is there, not wider)
+        wall = np.minimum.reduce((rows + 1, cols + 1, height - rows, mask.shape[1] - cols))
+        ends, leaf_ends = cut_leaves(pred, arc, np.minimum(radius, wall), branching, ends,
+                                     removed, params.leaf_widening,
+                                     params.petiole_m / grid.pixel_m)
         # Every plant grows up to a tip of its own. A leaf that droops from a stem onto the
         # floor is longer than the stem below its petiole (it has to come down as far, and
         # not straight down), so grown from both, the stem's base reaches the petiole first:
         # the leaf's contact gets only a part of the leaf, with no tip of its own.
         owner = _owners(order, pred, roots)
         barren = np.ones(roots.size, bool)
-        barren[owner[ends]] = False
+        barren[owner[ends + leaf_ends]] = False  # (a seedling may hold leaves alone)
         if not barren.any() or barren.all():
             break
         roots, root_cols = roots[~barren], root_cols[~barren]
@@ -186,7 +202,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         rows=rows, cols=cols, xz=grid.xz(centre_rows + top, centre_cols + left), order=order,
         pred=pred, arc=arc,
         radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
-        junction=junction, removed=removed, ends=ends,
+        junction=junction, removed=removed, ends=ends, leaf_ends=leaf_ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
         unattached=int(n - reached.sum()),
         unexplained=_unexplained(mask[box], rows[roots] - top, cols[roots] - left))

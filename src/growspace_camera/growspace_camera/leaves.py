@@ -1,0 +1,93 @@
+"""Leaves on the skeleton: end branches that end in a blade, not in a shoot tip.
+
+The simulator's plant has no leaves: its tips are shoot tips, and its drawing is its branches.
+A real plant's leaf thins into a skeleton end branch as a shoot does, so measured as one it is
+a false tip, and a leaf at a shoot's end carries that shoot's tip out to the leaf's end.
+
+A shoot keeps its width or narrows towards its tip (the simulator thickens a segment with its
+descendants and draws a tip narrower still; real stems do the same). A blade is wider than the
+stalk that holds it (a petiole, or its own narrow base). So an end branch, walked from the stem
+it leaves (past that stem's own radius) out to its end, ends in a leaf when its widest part
+lies beyond ``BLADE_FROM`` of its length and is ``leaf_widening`` times, and at least
+``LEAF_RISE_PX`` more than, the narrowest radius before it.
+
+The branch is cut where its narrowest stretch before the blade (the petiole, at most
+``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
+tip. Where what is left is shorter than ``petiole_m``, the whole branch is the leaf.
+
+Measured on the twin's leafy photos (tuning combinations; docs/hardware.md). Left as they are:
+a blade lying along a stem (no end branch of its own), a leaf no wider than what holds it,
+and a blunt blade end with no narrower stalk (an end radius rule found more of the twin's
+leaves but also took the round ends of thick stems, as a real stem's cut or broken end is).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+LEAF_RISE_PX = 1.0  # a blade is at least this much wider than its petiole (the distance
+# transform's radii step by about 0.96 px across a stem)
+BLADE_FROM = 0.45  # of the branch's length: a blade's widest part lies beyond this
+SMOOTH_PX = 5  # the radius is read as a median over this many path pixels
+
+
+def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching: np.ndarray,
+               ends: list[int], removed: np.ndarray, widening: float,
+               petiole_px: float) -> tuple[list[int], list[int]]:
+    """Cut the leaves off the end branches (see the module docstring).
+
+    Args:
+        pred: Predecessor of each pixel on its path (-1 at a base).
+        arc: Arc length from the floor per pixel [px].
+        radius: Distance to the mask's edge per pixel [px].
+        branching: Per pixel, a junction or a base (an end branch leaves from one).
+        ends: The end points after spur pruning.
+        removed: Per pixel, pruned; the leaves' pixels are set too (in place).
+        widening: ``leaf_widening``; 0: no leaves are cut.
+        petiole_px: ``petiole_m`` in pixels.
+
+    Returns:
+        (the end points: shoots' ends, cut ones included; the leaves' end points).
+    """
+    shoots, leaves = [], []
+    for end in ends:
+        path = [end]
+        while not branching[path[-1]] and pred[path[-1]] >= 0:
+            path.append(int(pred[path[-1]]))
+        path.reverse()  # from the junction (or base) out to the end
+        cut = _leaf_cut(path, arc, radius, widening, petiole_px)
+        if cut is None:
+            shoots.append(end)
+            continue
+        leaves.append(end)
+        whole = cut == 0 or arc[path[cut]] - arc[path[0]] < petiole_px
+        for p in path[1:] if whole else path[cut + 1:]:
+            removed[p] = True
+        if not whole:
+            shoots.append(path[cut])
+    return shoots, leaves
+
+
+def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: float,
+              petiole_px: float) -> int | None:
+    """Index into ``path`` where a leaf begins (0: the whole branch), or None (a shoot)."""
+    s = arc[path] - arc[path[0]]
+    r = radius[path]
+    own = np.flatnonzero(s >= r[0])  # beyond the radius of the stem it leaves
+    if own.size < 2:
+        return None
+    s = s[own]
+    # A blade is wide along a stretch: a pixel or two of bulge where a crossing branch or a
+    # corner touches the path is not one (a median over ``SMOOTH_PX`` along the path).
+    r = median_filter(r[own], size=SMOOTH_PX, mode='nearest')
+    widest = int(np.argmax(r))
+    narrow = widest - int(np.argmin(r[widest::-1]))  # the last narrowest: nearest the blade
+    if not (widening > 0 and s[widest] >= BLADE_FROM * s[-1]
+            and r[widest] >= widening * r[narrow] and r[widest] - r[narrow] >= LEAF_RISE_PX):
+        return None
+    start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
+    while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
+            and s[narrow] - s[start - 1] <= petiole_px:
+        start -= 1
+    return int(own[start])

@@ -1,0 +1,98 @@
+"""Leaves are cut off the shoots: known answers on tiny masks drawn here.
+
+Same grid as test_camera_skeleton (2 mm pixels over 0.2 m, nodes every 0.05 m): a stem 12 mm
+wide and leaves drawn as a petiole 2 mm wide and a blade (a filled ellipse) 16 mm wide.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from test_camera_skeleton import GRID, mask_of, near, tree_of
+
+STEM = [(0.1, 0.0), (0.1, 0.16)]
+
+
+def blade(mask: np.ndarray, start: tuple[float, float], end: tuple[float, float],
+          width_m: float = 0.016) -> np.ndarray:
+    """``mask`` with a leaf blade from ``start`` to ``end`` (x, z in m), ``width_m`` wide."""
+    (x0, z0), (x1, z1) = start, end
+    centre = ((x0 + x1) / 2 / GRID.pixel_m, (0.2 - (z0 + z1) / 2) / GRID.pixel_m)
+    size = (float(np.hypot(x1 - x0, z1 - z0) / GRID.pixel_m), width_m / GRID.pixel_m)
+    angle = float(-np.degrees(np.arctan2(z1 - z0, x1 - x0)))
+    out = mask.astype(np.uint8)
+    cv2.ellipse(out, (centre, size, angle), 1, -1)  # a rotated rectangle's inscribed ellipse
+    return out.astype(bool)
+
+
+def leafy(*leaves: tuple[tuple[float, float], tuple[float, float], tuple[float, float]],
+          stem: list[tuple[float, float]] = STEM) -> np.ndarray:
+    """A stem with leaves, each (node, petiole end, blade end)."""
+    mask = mask_of(stem)
+    for node, base, end in leaves:
+        mask |= mask_of([node, base], width_m=0.002)
+        mask = blade(mask, base, end)
+    return mask
+
+
+def test_a_leaf_on_a_petiole_is_not_a_tip_and_its_end_is_a_leaf_tip():
+    mask = leafy(((0.1, 0.07), (0.12, 0.08), (0.17, 0.10)))
+    tree = tree_of(mask)
+    assert tree.plants == 1 and tree.tips.size == 1
+    assert near(tree.nodes[tree.tips], (0.1, 0.16))  # the shoot
+    assert len(tree.leaf_tips) == 1 and near(tree.leaf_tips, (0.17, 0.10), 0.012)
+    assert not np.any(tree.nodes[:, 0] > 0.115)  # no node out on the leaf
+    # Turned off, the leaf is a branch with a tip at its end, as before.
+    whole = tree_of(mask, leaf_widening=0.0)
+    assert whole.tips.size == 2 and len(whole.leaf_tips) == 0
+
+
+def test_a_leaf_at_a_shoots_end_leaves_the_tip_at_the_shoots_end():
+    # The shoot ends at 0.13; a petiole of 1.5 cm then a blade carry its skeleton 8 cm on.
+    mask = leafy(((0.1, 0.13), (0.11, 0.14), (0.16, 0.17)), stem=[(0.1, 0.0), (0.1, 0.13)])
+    tree = tree_of(mask)
+    assert tree.tips.size == 1
+    tip = tree.nodes[tree.tips[0]]
+    assert np.hypot(*(tip - (0.1, 0.13))) < 0.01, tip  # within the bench's 1 cm
+    assert len(tree.leaf_tips) == 1
+    whole = tree_of(mask, leaf_widening=0.0)
+    assert np.hypot(*(whole.nodes[whole.tips[0]] - (0.1, 0.13))) > 0.03  # out on the leaf
+
+
+@pytest.mark.parametrize('width_m', [0.006, 0.012, 0.02])
+def test_shoots_that_narrow_to_their_tips_keep_them(width_m):
+    # A fork whose shoots taper to their tips, as the simulator's and real stems do: no leaf.
+    mask = np.zeros(GRID.shape, np.uint8)
+    px = width_m / GRID.pixel_m
+    for (x0, z0), (x1, z1), w0, w1 in (((0.1, 0.0), (0.1, 0.1), 1.0, 1.0),
+                                       ((0.1, 0.1), (0.05, 0.17), 0.8, 0.35),
+                                       ((0.1, 0.1), (0.16, 0.16), 0.8, 0.35)):
+        a = np.array((x0, 0.2 - z0)) / GRID.pixel_m
+        b = np.array((x1, 0.2 - z1)) / GRID.pixel_m
+        normal = np.array((b - a)[::-1]) * (1, -1) / np.hypot(*(b - a))
+        quad = np.array([a + normal * w0 * px / 2, b + normal * w1 * px / 2,
+                         b - normal * w1 * px / 2, a - normal * w0 * px / 2])
+        cv2.fillConvexPoly(mask, np.round(quad * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+    tree = tree_of(mask.astype(bool))
+    assert tree.tips.size == 2 and len(tree.leaf_tips) == 0
+    assert near(tree.nodes[tree.tips], (0.05, 0.17), 0.008)
+    assert near(tree.nodes[tree.tips], (0.16, 0.16), 0.008)
+
+
+def test_a_blade_straight_off_a_stem_is_all_leaf():
+    # No petiole: the blade's own narrow base leaves the stem's edge, and it widens from there.
+    mask = blade(mask_of(STEM), (0.105, 0.08), (0.17, 0.11), width_m=0.024)
+    tree = tree_of(mask)
+    assert tree.tips.size == 1 and near(tree.nodes[tree.tips], (0.1, 0.16))
+    assert len(tree.leaf_tips) == 1
+
+
+def test_a_plant_holding_only_leaves_is_still_a_plant():
+    # A seedling: a short stem and two leaves on petioles, no shoot tip of its own beyond.
+    mask = leafy(((0.1, 0.07), (0.085, 0.08), (0.04, 0.11)),
+                 ((0.1, 0.07), (0.115, 0.08), (0.16, 0.11)), stem=[(0.1, 0.0), (0.1, 0.07)])
+    tree = tree_of(mask, min_stem_m=0.03)
+    assert tree.plants == 1
+    assert len(tree.leaf_tips) == 2
