@@ -48,10 +48,12 @@ Fixed method (every draw seeded, so a run is repeatable):
 
 Usage (workspace sourced): python scripts/bench_camera.py [--episodes 4] [--loop-episodes 20]
        [--factor-episodes 1] [--loop-episodes-varied 4] [--combinations held_out|tuning]
-       [--speed-photos 60] [--json out.json] [--quick]
+       [--speed-photos 60] [--json out.json] [--quick] [--jobs N]
 --quick (development: 1 episode per cell, steps 12, 30 and 50, 2 + 2 loop episodes, 10 speed
 photos) takes about 3 minutes of one core; the defaults about half an hour (a loaded machine
-slows both several times).
+slows both several times). ``--jobs N`` runs the fidelity episodes and the closed loops in N
+processes with the same figures (16 on a 16-core machine: the whole bench in about 4 minutes);
+speed is measured on one pinned core either way.
 Ends with two lines: camera held_out: <the headline figures> closed_loop=.. ms_per_photo=..
 (the varied twin), then, the old twin's: camera: iou_mean=.. iou_p5=.. tips_1cm=..
 reward_mae=.. closed_loop=.. ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
