@@ -10,7 +10,13 @@ import cv2
 import numpy as np
 import pytest
 
+from growspace_camera.markers import MarkerLayout
+from growspace_camera.measure import Target
+from growspace_camera.messages import measurement_msg
+from growspace_camera.pipeline import Pipeline
+from growspace_camera.twin import PhotoTwin, Variation
 from test_camera_skeleton import GRID, mask_of, near, tree_of
+from test_camera_vision import grown_by_oracle
 
 STEM = [(0.1, 0.0), (0.1, 0.16)]
 
@@ -96,3 +102,15 @@ def test_a_plant_holding_only_leaves_is_still_a_plant():
     tree = tree_of(mask, min_stem_m=0.03)
     assert tree.plants == 1
     assert len(tree.leaf_tips) == 2
+
+
+def test_a_leafy_twin_photo_reports_its_leaves_in_the_measurement_message():
+    grown = grown_by_oracle('control', 'easy', seed=1000, steps=30)
+    c = grown.sim.chamber
+    shot = PhotoTwin(MarkerLayout()).photo(c, seed=100030, variation=Variation.only('leaves'),
+                                           rig_seed=1000)
+    m = Pipeline().measure(shot.bgr, grown.cfg, c.light.copy(), Target(c.target), c.steps)
+    assert m.ok, m.error
+    msg = measurement_msg(m, 0, 30, 'chamber', 0.0025)
+    assert msg.leaves == len(m.tree.leaf_tips) == m.confidence.leaves > 0
+    assert msg.tips == m.tree.tips.size

@@ -85,7 +85,7 @@ SAMPLES = [
         'markers_seen': [0, 1, 3], 'fit_held': True, 'fit_age': 2, 'fit_error_m': 0.00125,
         'exposure_mean': 0.5, 'saturated': 0.0, 'threshold': 0.25, 'contrast': 0.5,
         'plant_pixels': 4321, 'specks': 7, 'skeleton_pixels': [300, 12],
-        'unattached_pixels': 3, 'tips': 5, 'tips_pruned': 1, 'pixel_size_m': 0.002,
+        'unattached_pixels': 3, 'tips': 5, 'tips_pruned': 1, 'leaves': 2, 'pixel_size_m': 0.002,
         'processing_s': 0.015625}),
     ('capture_request', CAPTURE_REQUEST, {
         'header': header(), 'step_id': 4, 'step': 4, 'config': '{"config": {}}',

@@ -117,6 +117,7 @@ def measurement_msg(m: Measurement, stamp_ns: int, step_id: int, frame_id: str,
         plant_pixels=c.plant_pixels, specks=c.specks,
         skeleton_pixels=np.asarray(c.skeleton_px, np.uint32),
         unattached_pixels=c.unattached_px, tips=c.tips, tips_pruned=c.tips_pruned,
+        leaves=c.leaves,
         pixel_size_m=pixel_size_m, processing_s=m.timings_ms.get('total', 0.0) / 1000.0)
 
 
