@@ -260,11 +260,12 @@ def overlay(photo: np.ndarray, measurement: Measurement, scale: float = 0.5) -> 
         r, c = pixels[inside, 1].astype(int), pixels[inside, 0].astype(int)
         picture[r, c] = (0.4 * picture[r, c] + (0, 153, 0)).astype(np.uint8)
         tree = measurement.tree
-        for points, colour in (() if tree is None else
-                               ((tree.nodes[tree.tips], (0, 0, 255)),
-                                (tree.leaf_tips, (0, 255, 255)))):
-            for x, y in fit.fit.photo_points(points) * scale if len(points) else ():
-                cv2.circle(picture, (int(x), int(y)), 4, colour, 2)
+        if tree is not None:
+            for points, colour in ((tree.nodes[tree.tips], (0, 0, 255)),
+                                   (tree.leaf_tips, (0, 255, 255))):
+                if len(points):
+                    for x, y in fit.fit.photo_points(points) * scale:
+                        cv2.circle(picture, (int(x), int(y)), 4, colour, 2)
     for d in measurement.detections:
         cv2.polylines(picture, [np.rint(d.corners * scale).astype(np.int32)], True,
                       (255, 0, 255), 2)

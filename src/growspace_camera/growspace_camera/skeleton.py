@@ -156,6 +156,9 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
     root_cols = _stem_centres(mask, mask if coverage is None else coverage, root_cols,
                               band_px + radius[roots])
     degree = _degree(src, dst, n)
+    # (a stem pressed against the chamber's wall is as wide as it is there, not wider)
+    walled = np.minimum(radius, np.minimum.reduce((rows + 1, cols + 1, height - rows,
+                                                   mask.shape[1] - cols)))
     while True:
         # A virtual source joins every base at its height: arc length counts from z = 0.
         graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
@@ -181,11 +184,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
                                        max(params.spur_m / grid.pixel_m, 1.0), params)
         branching = degree >= 3
         branching[roots] = True
-        # (a stem pressed against the chamber's wall is as wide as it is there, not wider)
-        wall = np.minimum.reduce((rows + 1, cols + 1, height - rows, mask.shape[1] - cols))
-        ends, leaf_ends = cut_leaves(pred, arc, np.minimum(radius, wall), branching, ends,
-                                     removed, params.leaf_widening,
-                                     params.petiole_m / grid.pixel_m)
+        ends, leaf_ends = cut_leaves(pred, arc, walled, branching, ends, removed,
+                                     params.leaf_widening, params.petiole_m / grid.pixel_m)
         # Every plant grows up to a tip of its own. A leaf that droops from a stem onto the
         # floor is longer than the stem below its petiole (it has to come down as far, and
         # not straight down), so grown from both, the stem's base reaches the petiole first:
