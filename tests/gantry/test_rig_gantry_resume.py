@@ -20,6 +20,7 @@ from growspace_sim.replay import Bag, read_episodes
 from growspace_sim.rig.rundir import read_journal
 from growspace_sim.rig.runner import reset_id_of
 from test_rig_ros import grbl, NAMESPACE, start_camera, start_gantry, wait_until_idle  # noqa: F401
+from waiting import wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -56,10 +57,10 @@ def test_a_killed_gantry_node_resumes_the_episode_and_every_step_is_recorded_onc
             _rig('run', str(run), '--chamber', 'attach', '--namespace', NAMESPACE,
                  '--episodes', '1', '--seed', '5', '--step-timeout', '15', '--retry-period',
                  '1'), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        deadline = time.monotonic() + TIMEOUT_S
-        while _journaled(run) < 7 and runner.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)  # polling a file another process writes
-        assert _journaled(run) >= 7, runner.communicate()[0] if runner.poll() else 'slow'
+        # (polled often: the kill must land mid-episode, soon after the seventh step)
+        wait_until(lambda: _journaled(run) >= 7 or runner.poll() is not None, TIMEOUT_S,
+                   'the runner journals seven steps', between=lambda: time.sleep(0.02))
+        assert _journaled(run) >= 7, runner.communicate()[0]
         gantry.stop(signal.SIGKILL)  # mid-episode: in a move, a growth period or a photo
         killed_at = _journaled(run)
         out = runner.communicate(timeout=TIMEOUT_S)[0]  # the step it waits for times out
