@@ -83,6 +83,26 @@ def test_a_hard_lamp_edge_beside_a_stem_leaves_only_the_stem():
     assert columns.min() >= 88 and columns.max() <= 96, columns
 
 
+@pytest.mark.parametrize('gap', [3, 6, 12])
+def test_the_unlit_backdrop_between_lamp_bands_is_not_plant(gap):
+    # An LED bar's beam in four hard-edged bands with unlit backdrop between them, narrower
+    # than half the flat field's window: the light estimated there keeps the lamp's magenta,
+    # and the grey backdrop read green after the division, a stem from the floor to the top.
+    photo = grey()
+    pitch = 14 + gap
+    for k in range(4):
+        left = 40 + k * pitch
+        photo[:, left:left + 14] *= np.array((1.42, 1.15, 1.5), np.float32)
+    photo[:, 100:104] = GREEN_SHOOT  # a full-height stem in the unlit strip right of the beam
+    photo[60:64, 30:104] = GREEN_SHOOT  # a branch across every band and gap
+    seg = plant_mask(cv2.GaussianBlur(photo, (0, 0), 0.7), SegmentParams())
+    stray = seg.mask.copy()  # what is plant beyond the plant and the blur and halo beside it
+    stray[:, 96:108] = False
+    stray[54:70] = False
+    assert not stray.any(), np.unique(np.argwhere(stray)[:, 1])
+    assert seg.mask[:, 100:104].all() and seg.mask[61, 30:104].all()
+
+
 @pytest.mark.parametrize('bark', [(50.0, 76.0, 99.0), (38.0, 47.0, 60.0), (70.0, 95.0, 125.0)])
 def test_a_brown_woody_stem_is_plant_a_neutral_dark_line_is_not(bark):
     photo = grey(level=170.0)

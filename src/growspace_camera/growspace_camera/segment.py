@@ -30,6 +30,7 @@ WARM_FROM = 0.015  # warmth (``tissue``) below which a dark pixel is not bark at
 WARM = 0.04  # ... and from which, this much above, it counts fully as bark
 BARK_DILUTION = 0.5  # the constant in the warmth's sum, in backdrop grey levels
 BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
+STRIP_FRACTION = 0.5  # a mask column this full of photo-grey pixels is an unlit strip
 FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked against those above
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
@@ -234,17 +235,11 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     bark = tissue(bgr, float(balance.mean()), np.zeros_like(first))
     rough = (rough | (bark > max(_otsu(bark), params.min_greenness))).view(np.uint8)
     rough = _without_floods(cv2.dilate(rough, np.ones((5, 5), np.uint8)).view(bool))
-    # Two passes: a wide median first (a thick brown trunk, which greenness missed, is less
-    # than half of its window), then a narrower one, which follows closer lamp bands, with
-    # what the first found left out.
-    flat, level, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
-    found = tissue(flat, level)
-    # Half of Otsu's: a dark old trunk under bright young shoots (about half as green) must
-    # be left out of the narrow flat field, which would take it for light and divide it away;
-    # the noise level alone would take in the faint line along a lamp's edge, which the
-    # narrow field exists to follow.
-    found = found > max(0.5 * _otsu(found), _plant_threshold(found, params.min_greenness))
-    rough |= cv2.dilate(found.view(np.uint8), np.ones((5, 5), np.uint8)).view(bool)
+    # Two medians: a wide one gives the light to assume behind what may be plant (a thick
+    # trunk is less than half of its window), a narrow one follows the lamp's bands. What only
+    # the wide one's division shows as tissue is not left out of the narrow one: that is
+    # mostly the backdrop between lamp bands, which the wide median did not follow.
+    _, _, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
     flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
     green = greenness(flat)
@@ -261,6 +256,7 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
     # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
     mask = _hysteresis(exg, low, threshold, green, SEED_GREENNESS)
+    mask[_unlit_strips(mask.view(bool) & ~rough)] = 0
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
@@ -287,6 +283,20 @@ def _without_floods(rough: np.ndarray) -> np.ndarray:
     flood = stats[:, cv2.CC_STAT_AREA] > FLOOD_FRACTION * rough.size
     flood[0] = False
     return rough & ~flood[labels] if flood.any() else rough
+
+
+def _unlit_strips(new: np.ndarray) -> np.ndarray:
+    """The pixels of ``new`` (in the mask, but not plant-coloured in the photo itself) in the
+    columns that they fill for ``STRIP_FRACTION`` of the chamber's height or more.
+
+    A strip of backdrop that a hard-edged lamp leaves unlit (between an LED bar's bands, or
+    between the beam's edge and the wall) narrower than half the flat field's window keeps
+    the lamp's colour in the light estimated there, so it reads as tissue after the division,
+    from the floor to the top. A stem is plant-coloured in the photo for most of its height
+    (the rough mask), so this leaves it alone.
+    """
+    columns = np.count_nonzero(new, axis=0) >= STRIP_FRACTION * new.shape[0]
+    return new & columns[None, :]
 
 
 def _floor_rows(index: np.ndarray, pixel_m: float) -> None:
