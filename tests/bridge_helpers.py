@@ -10,7 +10,7 @@ import numpy as np
 
 
 def loopback_domain() -> Iterator[int]:
-    """The session's ROS domain (conftest: loopback only, random id), for fixtures."""
+    """The test module's ROS domain (conftest: loopback only, one per module), for fixtures."""
     yield int(os.environ['ROS_DOMAIN_ID'])
 
 

@@ -37,6 +37,7 @@ def domain() -> Iterator[int]:
     yield from loopback_domain()
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_killed_node_raises_node_died_with_its_exit_code() -> None:
     env = GrowSpaceBridgeEnv('control', 'easy', timeout_s=30.0)
     try:
@@ -63,6 +64,7 @@ def test_node_that_fails_to_start_reports_its_exit_code_and_stderr() -> None:
         env.close()
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_stalled_node_times_out_and_its_late_reply_is_ignored() -> None:
     env = GrowSpaceBridgeEnv('control', 'easy', timeout_s=0.5)
     local = GrowSpaceEnv('control', 'easy')
@@ -176,6 +178,7 @@ def _async_bridged(**kwargs) -> gym.vector.AsyncVectorEnv:
     return gym.vector.AsyncVectorEnv([make, make], context='spawn')
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('fault', ['killed', 'stalled'])
 def test_async_vector_env_hands_the_parent_the_workers_error(fault: str) -> None:
     vec = _async_bridged(timeout_s=1.0)
@@ -239,6 +242,7 @@ if __name__ == '__main__':
 """
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('victim', ['trainer', 'worker'])
 def test_no_node_outlives_a_killed_trainer_or_worker(victim: str) -> None:
     # trainer: SIGKILL the vector env's process while one node is stalled (SIGSTOP); worker:

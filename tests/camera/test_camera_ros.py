@@ -36,6 +36,7 @@ def camera_executable() -> str:
                         'camera_node')
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_one_capture_request_is_answered_with_observation_plant_and_reward() -> None:
     node = NodeProcess('-p', 'source:=twin', '-p', 'twin_seed:=2',
                        executable=camera_executable())

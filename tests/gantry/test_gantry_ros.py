@@ -50,6 +50,7 @@ def start_gantry(grbl: GrblEmulator, *args: str) -> NodeProcess:
                        executable=gantry_executable())
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_bridge_link_drives_the_gantry_then_sigterm_mid_move(grbl: GrblEmulator) -> None:
     node = start_gantry(grbl)
     transport = RclpyTransport('gantry_test_client', '/gs_test')

@@ -45,6 +45,7 @@ def _gantry(grbl, recording: Path, *args: str):  # noqa: F811 - the fixture's va
                         'watchdog_s:=0.0', *args)
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_a_killed_gantry_node_resumes_the_episode_and_every_step_is_recorded_once_with_its_photo(
         grbl, tmp_path):  # noqa: F811
     recording, run = tmp_path / 'gantry', tmp_path / 'run'

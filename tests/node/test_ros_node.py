@@ -635,6 +635,7 @@ def catches(pid: int, sig: int) -> bool:
     return bool(int(caught.split()[1], 16) >> (sig - 1) & 1)
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('delay_s', [0.1, 0.6])
 def test_sigterm_during_start_up_exits_cleanly(delay_s: float) -> None:
     proc = subprocess.Popen([sim_node_executable(), '--ros-args', '-r',
@@ -732,6 +733,7 @@ def _read(log: Any) -> str:
     return log.read()
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('second', [None, signal.SIGTERM], ids=['watchdog', 'second-signal'])
 def test_closing_that_hangs_is_bounded(second: int | None) -> None:
     proc, log = _start_hanging_node(f'{NAMESPACE}_hang_{second or 0}')

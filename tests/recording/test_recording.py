@@ -265,6 +265,7 @@ def test_sigterm_mid_episode_finishes_the_file(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_sigkill_leaves_complete_chunks_recoverable(tmp_path):
     path, fixed = tmp_path / 'kill.mcap', tmp_path / 'fixed.mcap'
     proc = subprocess.Popen(_cli('run', str(path), '--episodes', '100', '--realtime',

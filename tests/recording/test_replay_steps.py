@@ -126,6 +126,7 @@ def test_steps_the_recording_does_not_have_are_refused_before_anything_is_sent()
         play_steps(BAG, episode=1)
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_a_node_that_dies_mid_replay_stops_it_at_once(tmp_path):
     # The gantry's process died: no step_result will come, however long the step may take.
     import time

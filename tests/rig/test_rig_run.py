@@ -91,6 +91,7 @@ def _check_every_step_once(run: Path, expected: list[list[float]]) -> None:
     assert resimulate(recording).ok
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('damage', ['none', 'step_not_journaled', 'recording_tail_lost'])
 def test_sigkill_mid_episode_then_resume_runs_every_step_exactly_once(tmp_path, damage,
                                                                      expected_rewards):

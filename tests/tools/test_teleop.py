@@ -121,6 +121,7 @@ def _read_until(fd: int, needle: bytes, timeout: float) -> bytes:
     return out
 
 
+@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_teleop_in_a_terminal_drives_the_node() -> None:
     namespace = '/teleop_smoke'
     node = NodeProcess('-p', 'seed:=2', namespace=namespace)
