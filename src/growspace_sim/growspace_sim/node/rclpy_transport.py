@@ -224,7 +224,7 @@ class RclpyTransport:
         return name
 
     def publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> PublishFn:
-        serialize, write = types.serialize, self.raw_publisher(typename, topic, qos)
+        serialize, write = types.serialize, self._create_publisher(typename, topic, qos).publish
 
         def publish(msg: Any) -> bytes:
             cdr = serialize(msg, typename)
@@ -234,10 +234,25 @@ class RclpyTransport:
 
     def raw_publisher(self, typename: str, topic: str,
                       qos: ros_qos.QosProfile) -> Callable[[bytes], None]:
-        """A publisher of CDR bytes as they are (replay republishes recorded bytes)."""
+        """A publisher of CDR bytes as they are (replay republishes recorded bytes).
+
+        The function it returns raises ``ValueError`` for empty bytes: Fast DDS never sends a
+        sample with an empty payload, and a reliable writer then holds back everything
+        published after it (measured: a flood behind one empty message never arrived).
+        """
+        where, write = self.resolve(topic), self._create_publisher(typename, topic, qos).publish
+
+        def publish(cdr: bytes) -> None:
+            if not len(cdr):
+                raise ValueError(f'{where}: an empty message cannot be published (no CDR '
+                                 f'header); DDS would hold back everything sent after it.')
+            write(cdr)
+        return publish
+
+    def _create_publisher(self, typename: str, topic: str, qos: ros_qos.QosProfile) -> Any:
         pub = self.node.create_publisher(interface_class(typename), topic, to_rclpy_qos(qos))
         self._publishers[self.resolve(topic)] = pub
-        return pub.publish
+        return pub
 
     def subscribe(self, typename: str, topic: str, qos: ros_qos.QosProfile,
                   callback: MessageCallback) -> None:

@@ -45,7 +45,8 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
         log: Where progress lines go (None = quiet).
 
     Returns:
-        The number of messages published.
+        The number of messages published (an empty one, which DDS cannot send, is skipped
+        with a warning).
 
     Raises:
         ReplayError: The file cannot be read or the rate is not positive.
@@ -77,6 +78,11 @@ def play(path: str | os.PathLike, *, rate: float | None = 1.0, topics: Iterable[
                              - time.monotonic())
                     if delay > 0:
                         time.sleep(delay)
+                if not msg.data:  # no CDR header; DDS would hold back the rest of the topic
+                    if log is not None:
+                        log(f'warning: skipped an empty message on {msg.topic} at log time '
+                            f'{msg.log_time} ns')
+                    continue
                 publishers[msg.topic](msg.data)
                 count += 1
                 if log is not None and count % 500 == 0:
