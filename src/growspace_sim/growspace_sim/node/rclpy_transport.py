@@ -234,12 +234,9 @@ class RclpyTransport:
 
     def raw_publisher(self, typename: str, topic: str,
                       qos: ros_qos.QosProfile) -> Callable[[bytes], None]:
-        """A publisher of CDR bytes as they are (replay republishes recorded bytes).
-
-        The function it returns raises ``ValueError`` for empty bytes: Fast DDS never sends a
-        sample with an empty payload, and a reliable writer then holds back everything
-        published after it (measured: a flood behind one empty message never arrived).
-        """
+        """A publisher of CDR bytes as they are (replay republishes recorded bytes); it raises
+        ``ValueError`` for empty bytes, which Fast DDS never sends: a reliable writer then
+        holds back everything published after them (measured: a flood behind one)."""
         where, write = self.resolve(topic), self._create_publisher(typename, topic, qos).publish
 
         def publish(cdr: bytes) -> None:
