@@ -17,9 +17,31 @@ _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 
 
 def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
-               edge_m: float = EDGE_KERNEL_M,
-               fill: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
-    """Divide out the light falling on the backdrop, estimated away from the plant.
+               fill: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Divide out the light falling on the backdrop (``backdrop_light``, over the narrow
+    ``EDGE_KERNEL_M`` window that follows lamp bands), estimated away from the plant.
+
+    Args:
+        bgr: (rows, cols, 3) float32 rectified photo.
+        exclude: (rows, cols) bool, pixels that may be plant (left out of the estimate).
+        pixel_m: Grid pixel [m].
+        fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
+
+    Returns:
+        The photo as if lit evenly at its backdrop's mean grey level (float32), and that
+        level; the photo as it is where nothing is backdrop.
+    """
+    light = backdrop_light(bgr, exclude, pixel_m, EDGE_KERNEL_M, fill)
+    if light is None:
+        return bgr, float(np.mean(cv2.mean(bgr)[:3]))
+    # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
+    level = float(np.mean(cv2.mean(light)[:3]))
+    return cv2.divide(bgr, light, scale=level), level
+
+
+def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m: float,
+                   fill: np.ndarray | None = None) -> np.ndarray | None:
+    """The light falling on the backdrop, estimated away from the plant.
 
     The backdrop is neutral and everywhere behind the plant, so its local colour is the local
     light (the white photo light, the grow lamp's cast where it falls, vignetting). A mean
@@ -38,12 +60,11 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
         fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
 
     Returns:
-        The photo as if lit evenly at its backdrop's mean grey level (float32), that level,
-        and the light estimated (float32 BGR).
+        The light (float32 BGR), or None where nothing is backdrop.
     """
     backdrop = (~exclude).view(np.uint8)
     if not backdrop.any():
-        return bgr, float(np.mean(cv2.mean(bgr)[:3])), bgr
+        return None
     average = cv2.mean(bgr, backdrop)[:3]
     if not exclude.any():
         fill = bgr
@@ -64,9 +85,7 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
     dim = grey < floor
     if dim.any():
         light[dim] *= (floor / np.maximum(grey[dim], 1.0))[:, None]
-    # Back to the photo's grey levels, so that dark stays dark for ``greenness``.
-    level = float(np.mean(cv2.mean(light)[:3]))
-    return cv2.divide(bgr, light, scale=level), level, light
+    return light
 
 
 def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,

@@ -17,7 +17,7 @@ import numpy as np
 
 from growspace_camera.calibration import PlaneFit
 from growspace_camera.errors import CameraError, EXPOSURE
-from growspace_camera.flatfield import flat_field
+from growspace_camera.flatfield import backdrop_light, flat_field
 
 SATURATED = 250  # grey level from which a pixel counts as clipped
 EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5) x scale
@@ -239,8 +239,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     # trunk is less than half of its window), a narrow one follows the lamp's bands. What only
     # the wide one's division shows as tissue is not left out of the narrow one: that is
     # mostly the backdrop between lamp bands, which the wide median did not follow.
-    _, _, light = flat_field(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
-    flat, level, _ = flat_field(bgr, rough, params.pixel_m, fill=light)
+    light = backdrop_light(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
+    flat, level = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
     green = greenness(flat)
     exg = tissue(flat, level, green)
