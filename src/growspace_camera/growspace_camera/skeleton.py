@@ -4,13 +4,13 @@ The mask's skeleton (``skimage.morphology.skeletonize``) is a pixel graph of 8-n
 Each group of skeleton pixels near the floor may be a stem base (sorted left to right: plant 0
 is the leftmost, as in the simulator's layouts); Dijkstra from all bases at once gives each
 pixel its base and the path back to it, so crossing branches (loops in 2-D) still form trees.
+Its cost grows as tissue thins (the way down from a tip runs through ever thicker stems): a
+loop is cut where a leaf or a thin shoot lies across a branch of its own plant or the next.
 A group is a base only if it rises near vertical and, so grown, has a tip of its own: a leaf
-drooping across the soil line has neither, and is a leaf of the plant it hangs from. Along
-those paths arc length is summed over chords of a few pixels: counting 8-steps would make a
-line at 22.5 degrees 8 % too long, and any fixed pair of step weights is wrong for some
-direction (Dorst-Smeulders' make a vertical stem 5 % short). Short end branches that thinning
-leaves on thick stems (spurs) are pruned, and so are the ends thinning leaves in the corners of
-a stem's square cut end; the remaining end points are the tips.
+drooping across the soil line has neither, and is a leaf of the plant it hangs from. Arc
+length is summed over chords of a few pixels (8-steps make a line at 22.5 degrees 8 % too
+long). Short end branches that thinning leaves on thick stems (spurs) are pruned, and so are
+the ends it leaves in the corners of a stem's square cut end; the rest are the tips.
 ``growspace_camera.nodes`` turns the graph into the simulator's node arrays.
 """
 
@@ -31,6 +31,7 @@ from growspace_camera.segment import Grid
 NEIGHBOURS = ((0, 1, 1.0), (1, -1, np.sqrt(2.0)), (1, 0, 1.0), (1, 1, np.sqrt(2.0)))
 CHORD_PX = 5  # arc length is summed over chords this many steps long
 TURN_PX = 8  # turning is measured between chords this long (a thick stem rounds its corners)
+THIN_PX = 5.0  # a path costs (1 + (THIN_PX / radius) ** 2) per pixel (tuning: 4-6 alike)
 
 
 @dataclass(frozen=True)
@@ -46,10 +47,8 @@ class TreeParams:
         corner_deg: A path turning by at least this much has a node there [deg].
         min_stem_m: A base carrying less skeleton than this is a speck, not a plant [m].
         max_base_tilt_deg: A piece of plant reaching the floor is a stem base only if its
-            ``min_stem_m`` above the base band rise within this angle of vertical [deg]: the
-            simulator's first stem is vertical, and a leaf drooping across the soil line or a
-            branch lying on it meets it at a slant. (A leaf hanging steeply is told apart by
-            having no tip of its own: see ``skeleton_graph``.)
+            ``min_stem_m`` above the base band rise within this angle of vertical [deg] (a
+            first stem is vertical; a leaf or branch lying across the soil line is slanted).
         leaf_widening: An end branch that widens to this many times its narrowest radius
             ends in a leaf, cut off its shoot (``leaves``); 0: no leaves are cut.
         petiole_m: A shoot left shorter than this by cutting its leaf off is a petiole: all
@@ -159,9 +158,11 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
     # (a stem pressed against the chamber's wall is as wide as it is there, not wider)
     walled = np.minimum(radius, np.minimum.reduce((rows + 1, cols + 1, height - rows,
                                                    mask.shape[1] - cols)))
+    cost = weight * (1.0 + (THIN_PX / np.maximum(np.minimum(radius[src], radius[dst]),
+                                                  0.5)) ** 2)
     while True:
         # A virtual source joins every base at its height: arc length counts from z = 0.
-        graph = coo_matrix((np.r_[weight, height - 0.5 - rows[roots]],
+        graph = coo_matrix((np.r_[cost, height - 0.5 - rows[roots]],
                             (np.r_[src, np.full(roots.size, n)], np.r_[dst, roots])),
                            shape=(n + 1, n + 1))
         dist, pred = dijkstra(graph.tocsr(), directed=False, indices=n,
@@ -170,14 +171,14 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         pred[pred == n] = -1
         reached = np.isfinite(dist[:n])
         order = np.argsort(dist[:n], kind='stable')[:int(reached.sum())]
-        roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, dist[:n],
+        ancestor = _ancestors(pred, CHORD_PX)
+        arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
+        roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, arc,
                                                       reached, params.min_stem_m / grid.pixel_m)
         if roots.size == 0:
             raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, '
                               f'none of a stem at least min_stem_m = {params.min_stem_m} m '
                               f'tall')
-        ancestor = _ancestors(pred, CHORD_PX)
-        arc = _chord_lengths(order, dist[:n], ancestor, rows, cols)
         # The rest of each base's group in the band is the stem's cut end: no tips there.
         base = (group >= 0) & np.isin(group, group[roots])
         removed, ends, pruned = _prune(order, pred, arc, degree, radius, roots, base,
@@ -186,10 +187,9 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         branching[roots] = True
         ends, leaf_ends = cut_leaves(pred, arc, walled, branching, ends, removed,
                                      params.leaf_widening, params.petiole_m / grid.pixel_m)
-        # Every plant grows up to a tip of its own. A leaf that droops from a stem onto the
-        # floor is longer than the stem below its petiole (it has to come down as far, and
-        # not straight down), so grown from both, the stem's base reaches the petiole first:
-        # the leaf's contact gets only a part of the leaf, with no tip of its own.
+        # Every plant grows up to a tip of its own. A leaf drooping from a stem onto the floor
+        # meets it at its blade's end (no tip there), and the stem's base, over the thicker
+        # and shorter way, reaches its petiole first: the leaf's contact has no tip.
         owner = _owners(order, pred, roots)
         barren = np.ones(roots.size, bool)
         barren[owner[ends + leaf_ends]] = False  # (a seedling may hold leaves alone)
@@ -310,14 +310,14 @@ def _stem_bases(graph, roots: np.ndarray, group: np.ndarray,  # noqa: ANN001 - s
 
 
 def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pred: np.ndarray,
-                dist: np.ndarray, reached: np.ndarray,
+                arc: np.ndarray, reached: np.ndarray,
                 min_px: float) -> tuple[np.ndarray, ...]:
-    """Drop bases that carry less than ``min_px`` of skeleton (a speck of green on the soil
-    line is not a plant: every plant has at least its first stem); their pixels become
+    """Drop bases whose skeleton reaches less than ``min_px`` of arc length (a speck of green
+    on the soil line is not a plant: every plant has its first stem); their pixels become
     unattached."""
     base = _owners(order, pred, roots)
     height = np.zeros(roots.size)
-    np.maximum.at(height, base[order], dist[order])
+    np.maximum.at(height, base[order], arc[order])
     keep = height >= min_px
     if keep.all():
         return roots, root_cols, order, reached
