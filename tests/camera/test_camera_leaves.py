@@ -67,6 +67,19 @@ def test_a_leaf_at_a_shoots_end_leaves_the_tip_at_the_shoots_end():
     assert np.hypot(*(whole.nodes[whole.tips[0]] - (0.1, 0.13))) > 0.03  # out on the leaf
 
 
+def test_a_blade_whose_base_lies_on_the_stem_is_a_leaf_by_its_wide_end():
+    # No petiole and no narrow base: the blade (2.4 cm wide) starts at the stem's edge, so
+    # nothing narrower comes before its widest part; its end is wider than a shoot's.
+    mask = blade(mask_of(STEM), (0.105, 0.07), (0.165, 0.10), width_m=0.024)
+    tree = tree_of(mask)
+    assert tree.plants == 1 and tree.tips.size == 1
+    assert near(tree.nodes[tree.tips], (0.1, 0.16))  # the shoot
+    assert len(tree.leaf_tips) == 1 and near(tree.leaf_tips, (0.165, 0.10), 0.015)
+    assert not np.any(tree.nodes[:, 0] > 0.115)  # no node out on the leaf
+    # The widening rule alone does not see it: its end is a tip.
+    assert tree_of(mask, leaf_end_m=0.0).tips.size == 2
+
+
 @pytest.mark.parametrize('width_m', [0.006, 0.012, 0.02])
 def test_shoots_that_narrow_to_their_tips_keep_them(width_m):
     # A fork whose shoots taper to their tips, as the simulator's and real stems do: no leaf.

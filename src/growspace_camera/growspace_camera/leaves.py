@@ -11,14 +11,19 @@ it leaves (past that stem's own radius) out to its end, ends in a leaf when its 
 lies beyond ``BLADE_FROM`` of its length and is ``leaf_widening`` times, and at least
 ``LEAF_RISE_PX`` more than, the narrowest radius before it.
 
+A blade whose base lies on the stem, or on a petiole as wide, has no narrower stalk before
+it; but a shoot's end is thin (the simulator's tips are its thinnest segments, 1.3 cm wide
+at its defaults), so an end branch ``leaf_end_m`` (2 cm) wide within ``END_PX`` of its end
+is a blade too, its stalk ending where the branch was last a shoot's width.
+
 The branch is cut where its narrowest stretch before the blade (the petiole, at most
 ``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
 tip. Where what is left is shorter than ``petiole_m``, the whole branch is the leaf.
 
 Measured on the twin's leafy photos (tuning combinations; docs/hardware.md). Left as they are:
-a blade lying along a stem (no end branch of its own), a leaf no wider than what holds it,
-and a blunt blade end with no narrower stalk (an end radius rule found more of the twin's
-leaves but also took the round ends of thick stems, as a real stem's cut or broken end is).
+a blade lying along a stem (no end branch of its own) and a leaf no wider than what holds it.
+A stem's cut or broken end as wide as ``leaf_end_m`` is taken for a blade: set it above the
+widest shoot end of the plants grown.
 """
 
 from __future__ import annotations
@@ -30,11 +35,13 @@ LEAF_RISE_PX = 1.0  # a blade is at least this much wider than its petiole (the 
 # transform's radii step by about 0.96 px across a stem)
 BLADE_FROM = 0.45  # of the branch's length: a blade's widest part lies beyond this
 SMOOTH_PX = 5  # the radius is read as a median over this many path pixels
+END_PX = 6  # a blade end is wide within this many path pixels of the end (1.5 cm)
+SHOOT_OF_BLADE = 0.6  # a blade is cut where the branch is back to this part of blade_px
 
 
 def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching: np.ndarray,
                ends: list[int], removed: np.ndarray, widening: float,
-               petiole_px: float) -> tuple[list[int], list[int]]:
+               petiole_px: float, blade_px: float = 0.0) -> tuple[list[int], list[int]]:
     """Cut the leaves off the end branches (see the module docstring).
 
     Args:
@@ -46,6 +53,7 @@ def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching:
         removed: Per pixel, pruned; the leaves' pixels are set too (in place).
         widening: ``leaf_widening``; 0: no leaves are cut.
         petiole_px: ``petiole_m`` in pixels.
+        blade_px: Half of ``leaf_end_m`` in pixels (a radius); 0: no blade ends.
 
     Returns:
         (the end points: shoots' ends, cut ones included; the leaves' end points).
@@ -56,7 +64,7 @@ def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching:
         while not branching[path[-1]] and pred[path[-1]] >= 0:
             path.append(int(pred[path[-1]]))
         path.reverse()  # from the junction (or base) out to the end
-        cut = _leaf_cut(path, arc, radius, widening, petiole_px)
+        cut = _leaf_cut(path, arc, radius, widening, petiole_px, blade_px)
         if cut is None:
             shoots.append(end)
             continue
@@ -70,13 +78,14 @@ def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching:
 
 
 def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: float,
-              petiole_px: float) -> int | None:
+              petiole_px: float, blade_px: float) -> int | None:
     """Index into ``path`` where a leaf begins (0: the whole branch), or None (a shoot)."""
     s = arc[path] - arc[path[0]]
     r = radius[path]
+    blunt = blade_px > 0 and r[s >= s[-1] - END_PX].max() >= blade_px
     own = np.flatnonzero(s >= r[0])  # beyond the radius of the stem it leaves
     if own.size < 2:
-        return None
+        return 0 if blunt else None
     s = s[own]
     # A blade is wide along a stretch: a pixel or two of bulge where a crossing branch or a
     # corner touches the path is not one (a median over ``SMOOTH_PX`` along the path).
@@ -85,7 +94,14 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
     narrow = widest - int(np.argmin(r[widest::-1]))  # the last narrowest: nearest the blade
     if not (widening > 0 and s[widest] >= BLADE_FROM * s[-1]
             and r[widest] >= widening * r[narrow] and r[widest] - r[narrow] >= LEAF_RISE_PX):
-        return None
+        if not blunt:
+            return None
+        # No narrower stalk before the widest part, but an end as wide as a blade: its base
+        # lies on the stem (or on a petiole as wide); the shoot ends where it is last thin.
+        thin = np.flatnonzero(r <= SHOOT_OF_BLADE * blade_px)
+        if thin.size == 0:
+            return 0
+        narrow = int(thin[-1])
     start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
     while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
             and s[narrow] - s[start - 1] <= petiole_px:

@@ -53,6 +53,8 @@ class TreeParams:
             ends in a leaf, cut off its shoot (``leaves``); 0: no leaves are cut.
         petiole_m: A shoot left shorter than this by cutting its leaf off is a petiole: all
             leaf [m].
+        leaf_end_m: An end branch this wide near its end is a leaf blade: a shoot's end is
+            thinner [m]; 0: off.
     """
 
     base_band_m: float = 0.03
@@ -64,6 +66,7 @@ class TreeParams:
     max_base_tilt_deg: float = 35.0
     leaf_widening: float = 1.5
     petiole_m: float = 0.025
+    leaf_end_m: float = 0.02
 
 
 @dataclass
@@ -154,7 +157,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
     roots, root_cols = roots[stem], root_cols[stem]
     root_cols = _stem_centres(mask, mask if coverage is None else coverage, root_cols,
                               band_px + radius[roots])
-    degree = _degree(src, dst, n)
+    degree = np.bincount(np.r_[src, dst], minlength=n)
     # (a stem pressed against the chamber's wall is as wide as it is there, not wider)
     walled = np.minimum(radius, np.minimum.reduce((rows + 1, cols + 1, height - rows,
                                                    mask.shape[1] - cols)))
@@ -176,9 +179,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         roots, root_cols, order, reached = _real_stems(roots, root_cols, order, pred, arc,
                                                       reached, params.min_stem_m / grid.pixel_m)
         if roots.size == 0:
-            raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, '
-                              f'none of a stem at least min_stem_m = {params.min_stem_m} m '
-                              f'tall')
+            raise CameraError(NO_PLANT, f'no stem reaches the floor: {n} skeleton pixels, none '
+                              f'of a stem at least min_stem_m = {params.min_stem_m} m tall')
         # The rest of each base's group in the band is the stem's cut end: no tips there.
         base = (group >= 0) & np.isin(group, group[roots])
         removed, ends, pruned = _prune(order, pred, arc, degree, radius, roots, base,
@@ -186,7 +188,8 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         branching = degree >= 3
         branching[roots] = True
         ends, leaf_ends = cut_leaves(pred, arc, walled, branching, ends, removed,
-                                     params.leaf_widening, params.petiole_m / grid.pixel_m)
+                                     params.leaf_widening, params.petiole_m / grid.pixel_m,
+                                     0.5 * params.leaf_end_m / grid.pixel_m)
         # Every plant grows up to a tip of its own. A leaf drooping from a stem onto the floor
         # meets it at its blade's end (no tip there), and the stem's base, over the thicker
         # and shorter way, reaches its petiole first: the leaf's contact has no tip.
@@ -197,7 +200,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
             break
         roots, root_cols = roots[~barren], root_cols[~barren]
     keep = ~removed[src] & ~removed[dst]
-    junction = _degree(src[keep], dst[keep], n) >= 3
+    junction = np.bincount(np.r_[src[keep], dst[keep]], minlength=n) >= 3
     return SkeletonGraph(
         rows=rows, cols=cols, xz=grid.xz(centre_rows + top, centre_cols + left), order=order,
         pred=pred, arc=arc,
@@ -375,10 +378,6 @@ def _edges(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> tuple[
         dst.append(other[has])
         weight.append(np.full(int(has.sum()), w))
     return np.concatenate(src), np.concatenate(dst), np.concatenate(weight)
-
-
-def _degree(src: np.ndarray, dst: np.ndarray, n: int) -> np.ndarray:
-    return np.bincount(src, minlength=n) + np.bincount(dst, minlength=n)
 
 
 def _ancestors(pred: np.ndarray, steps: int) -> np.ndarray:
