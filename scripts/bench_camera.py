@@ -30,7 +30,8 @@ Fixed method (every draw seeded, so a run is repeatable):
 3. The varied twin (``twin.Variation``: how rigs differ, docs/hardware.md). Every fidelity
    photo is also drawn (same photo seed) on a rig of its episode: a factor combination per
    episode, its camera pose and factor values drawn from the episode's seed (a rig's camera
-   stays put, so the held plane fit meets what it is made for); combination ids from
+   stays put, so the held plane fit meets what it is made for; a rig with the ``lens``
+   factor gives the pipeline its lens's calibration, ``rig_pipeline``); combination ids from
    ``HELD_OUT_FIRST`` (1,000,000) by default, the held-out set never looked at while tuning;
    ``--combinations tuning`` uses ids from 0 for development. In the first
    ``--factor-episodes`` episodes of each cell, each photo is also drawn with each factor of
@@ -70,6 +71,7 @@ import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -79,7 +81,8 @@ from growspace_camera.markers import MarkerLayout
 from growspace_camera.nodes import PlantTree
 from growspace_camera.oracle_view import oracle_chamber, plant_view
 from growspace_camera.pipeline import Pipeline
-from growspace_camera.twin import FACTORS, HELD_OUT_FIRST, PhotoTwin, Variation
+from growspace_camera.twin import FACTORS, HELD_OUT_FIRST, optics, PhotoTwin, Variation
+from growspace_camera.twin.variation import draw_rig
 from growspace_sim.core import task as tasks
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.light import BEAM_ACTIONS, SPOT_ACTIONS
@@ -148,7 +151,7 @@ def _fidelity_episode(challenge: str, setting: str, e: int, twin: PhotoTwin,
     sim.reset(seed=seed)
     rng = np.random.default_rng(seed)
     oracle = cfg.task.oracle() if e % 2 == 0 else None
-    pipes = {name: Pipeline(PipelineParamsDefault) for name in variations}
+    pipes: dict[str, Pipeline] = {}
     actions = 7 if cfg.uses_spotlight else 5
     for step in range(1, cfg.episode_length + 1):
         action = oracle.act(sim.chamber) if oracle else int(rng.integers(actions))
@@ -166,12 +169,25 @@ def _fidelity_episode(challenge: str, setting: str, e: int, twin: PhotoTwin,
                 continue
             photo = twin.photo(sim.chamber, seed=seed * 100 + step,
                                variation=variation, rig_seed=seed)
+            if name not in pipes:
+                pipes[name] = rig_pipeline(variation, seed, cfg.plant_count, photo.bgr.shape)
             m = pipes[name].measure(photo.bgr, cfg, sim.chamber.light.copy(),
                                     target_of(sim), sim.chamber.steps)
             row = _compare(challenge, setting, seed, step, sim, outcome, m)
             row.update(floor, condition=name, factors=' '.join(sorted(variation.factors)))
             rows.append(row)
     return rows
+
+
+def rig_pipeline(variation: Variation | None, rig_seed: int, plants: int,
+                 shape: tuple[int, ...]) -> Pipeline:
+    """camera_node's pipeline as a rig runs it: the defaults, with the calibration of the
+    rig's lens where the twin draws one (``lens``: a rig calibrates its camera once)."""
+    k1 = draw_rig(rig_seed, variation, plants).distortion_k1 if variation else 0.0
+    if not k1:
+        return Pipeline(PipelineParamsDefault)
+    return Pipeline(replace(PipelineParamsDefault,
+                            lens=optics.calibration(k1, (shape[1], shape[0]))))
 
 
 def _map(function: Callable, work: list[tuple], jobs: int) -> list:
@@ -308,7 +324,7 @@ def _loop_episode(cfg: SimConfig, seed: int, mode: str, twin: PhotoTwin,
     photos). A refused photo leaves the oracle with the last view it had (none: stay)."""
     sim = Simulation(cfg)
     sim.reset(seed=seed)
-    oracle, pipe = cfg.task.oracle(), Pipeline(PipelineParamsDefault)
+    oracle, pipe = cfg.task.oracle(), None
     stay = (SPOT_ACTIONS if cfg.uses_spotlight else BEAM_ACTIONS).index('stay')
     view, total, estimate, refused = None, 0.0, 0.0, 0
     for step in range(cfg.episode_length + 1):
@@ -324,6 +340,7 @@ def _loop_episode(cfg: SimConfig, seed: int, mode: str, twin: PhotoTwin,
         elif mode == 'camera':
             photo = twin.photo(sim.chamber, seed=seed * 100 + step,
                                variation=variation, rig_seed=seed)
+            pipe = pipe or rig_pipeline(variation, seed, cfg.plant_count, photo.bgr.shape)
             m = pipe.measure(photo.bgr, cfg, sim.chamber.light.copy(), target_of(sim),
                              sim.chamber.steps)
             if m.ok:

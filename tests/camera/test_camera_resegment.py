@@ -146,8 +146,9 @@ def test_settings_come_from_a_params_file_and_a_resegmented_recording(bags, tmp_
     (['--set', 'dark_level=dark'], "--set: dark_level must be a number, got 'dark'."),
     (['--set', 'min_greenness'], "--set 'min_greenness': expected NAME=VALUE"),
     (['--set', 'fps=30'], "--set: 'fps' is not a setting of the camera pipeline; allowed: "
-                          'markers, pixel_size_m, min_greenness'),
+                          'markers, lens, pixel_size_m, min_greenness'),
     (['--set', 'markers=/nowhere.yaml'], "markers = '/nowhere.yaml' cannot be read"),
+    (['--set', 'lens=/nowhere.yaml'], "lens = '/nowhere.yaml' cannot be read"),
     (['--params', '/nowhere.yaml'], "argument --params: '/nowhere.yaml': the file does not "
                                     'exist'),
 ])

@@ -1,9 +1,10 @@
 """Photo -> chamber plane: a homography fitted to the markers of every photo.
 
 The plant grows in the chamber's x-z plane and the markers lie on that plane, so a pinhole
-camera sees the plane through a homography (lens distortion aside: see docs/hardware.md). All
-four markers give 16 corners with known chamber positions; ``cv2.findHomography`` fits them by
-least squares, and the residual says how well the markers agree with the layout.
+camera sees the plane through a homography (with a calibrated ``Lens``, between the plane and
+the photo as a distortion-free lens would have taken it). All four markers give 16 corners
+with known chamber positions; ``cv2.findHomography`` fits them by least squares, and the
+residual says how well the markers agree with the layout.
 
 When some markers are hidden (a leaf, the lamp, a hand), the last good fit is held if the
 markers still seen sit where it puts them: the camera has not moved. Otherwise, or with no fit
@@ -19,6 +20,7 @@ import cv2
 import numpy as np
 
 from growspace_camera.errors import CameraError, FIT, MARKERS
+from growspace_camera.lens import Lens
 from growspace_camera.markers import Detection, MarkerLayout
 
 
@@ -27,24 +29,28 @@ class PlaneFit:
     """A homography between photo pixels and chamber-plane metres.
 
     Attributes:
-        to_plane: (3, 3) photo (column, row, 1) -> chamber (x, z, 1) [m], homogeneous.
+        to_plane: (3, 3) photo (column, row, 1) -> chamber (x, z, 1) [m], homogeneous (the
+            photo's pixels as a distortion-free lens would have put them, with a ``lens``).
         to_photo: (3, 3) its inverse.
         markers: The marker ids it was fitted on.
         rms_error_m: RMS distance between the markers' fitted and laid-out corners [m].
+        lens: The calibrated lens the photo's pixels are undistorted with; None: none.
     """
 
     to_plane: np.ndarray = field(repr=False)
     to_photo: np.ndarray = field(repr=False)
     markers: tuple[int, ...]
     rms_error_m: float
+    lens: Lens | None = None
 
     def plane_points(self, pixels: np.ndarray) -> np.ndarray:
         """(N, 2) photo pixels -> (N, 2) chamber (x, z) [m]."""
-        return _apply(self.to_plane, pixels)
+        return _apply(self.to_plane, pixels if self.lens is None else self.lens.ideal(pixels))
 
     def photo_points(self, points: np.ndarray) -> np.ndarray:
         """(N, 2) chamber (x, z) [m] -> (N, 2) photo pixels (column, row)."""
-        return _apply(self.to_photo, points)
+        ideal = _apply(self.to_photo, points)
+        return ideal if self.lens is None else self.lens.distorted(ideal)
 
     def px_per_m(self, at: tuple[float, float]) -> float:
         """Photo pixels per metre on the plane near ``at`` (x, z) [m] (geometric mean)."""
@@ -81,11 +87,14 @@ class Calibrator:
     Args:
         layout: Where the markers are.
         max_error_m: Largest RMS corner error a fit or a hold check may have [m].
+        lens: The camera's calibrated lens; None: a distortion-free one.
     """
 
-    def __init__(self, layout: MarkerLayout, max_error_m: float = 0.005) -> None:
+    def __init__(self, layout: MarkerLayout, max_error_m: float = 0.005,
+                 lens: Lens | None = None) -> None:
         self.layout = layout
         self.max_error_m = max_error_m
+        self.lens = lens
         self.last: PlaneFit | None = None
         self._age = 0
 
@@ -104,7 +113,7 @@ class Calibrator:
         seen = tuple(d.marker_id for d in detections)
         expected = list(self.layout.ids)
         if len(seen) == len(expected):
-            fit = fit_plane(self.layout, detections)
+            fit = fit_plane(self.layout, detections, self.lens)
             if fit.rms_error_m > self.max_error_m:
                 raise CameraError(FIT, f'the markers do not sit where the layout says: RMS '
                                   f'corner error {fit.rms_error_m * 1000:.1f} mm > '
@@ -127,13 +136,17 @@ class Calibrator:
         return FitReport(self.last, seen, True, self._age, error)
 
 
-def fit_plane(layout: MarkerLayout, detections: Sequence[Detection]) -> PlaneFit:
-    """Least-squares homography of the detected markers' corners (at least one marker).
+def fit_plane(layout: MarkerLayout, detections: Sequence[Detection],
+              lens: Lens | None = None) -> PlaneFit:
+    """Least-squares homography of the detected markers' corners (at least one marker),
+    undistorted first with a ``lens``.
 
     Raises:
         CameraError: ``FIT`` if OpenCV finds no homography (degenerate corners).
     """
     photo, plane = _pairs(layout, detections)
+    if lens is not None:
+        photo = lens.ideal(photo)
     to_plane, _ = cv2.findHomography(photo, plane, 0)
     if to_plane is None or not np.all(np.isfinite(to_plane)) \
             or abs(np.linalg.det(to_plane)) < 1e-300:
@@ -142,7 +155,7 @@ def fit_plane(layout: MarkerLayout, detections: Sequence[Detection]) -> PlaneFit
     to_photo = np.linalg.inv(to_plane)
     residual = np.linalg.norm(_apply(to_plane, photo) - plane, axis=1)
     return PlaneFit(to_plane, to_photo, tuple(d.marker_id for d in detections),
-                    float(np.sqrt(np.mean(residual ** 2))))
+                    float(np.sqrt(np.mean(residual ** 2))), lens)
 
 
 def corner_error(fit: PlaneFit, layout: MarkerLayout, detections: Sequence[Detection]) -> float:

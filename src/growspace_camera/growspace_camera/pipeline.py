@@ -17,6 +17,7 @@ import numpy as np
 
 from growspace_camera.calibration import Calibrator, FitReport
 from growspace_camera.errors import BAD_INPUT, CameraError, UNEXPLAINED
+from growspace_camera.lens import Lens
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import measured_state, Observer, score, Target
 from growspace_camera.segment import (
@@ -45,6 +46,7 @@ class PipelineParams:
     # the twin's closed loop refused 26 such photos of 3,060 (control hard, 11 to 89 % of
     # the mask); on the twin's fidelity photos of grown plants it is 0 (docs/hardware.md).
     max_unexplained: float = 0.5
+    lens: Lens | None = None  # the camera's calibration; None: a distortion-free lens
 
 
 @dataclass
@@ -133,7 +135,7 @@ class Pipeline:
     def __init__(self, params: PipelineParams = PipelineParams()) -> None:
         self.params = params
         self.detector = MarkerDetector(params.layout)
-        self.calibrator = Calibrator(params.layout, params.max_fit_error_m)
+        self.calibrator = Calibrator(params.layout, params.max_fit_error_m, params.lens)
         self.observer = Observer()
 
     def measure(self, photo: np.ndarray, cfg: SimConfig, light: Light, target: Target,
@@ -165,6 +167,8 @@ class Pipeline:
                  steps: int, out: Measurement, clock: _Clock) -> None:
         p, c = self.params, out.confidence
         check_photo(photo)
+        if p.lens is not None:
+            p.lens.check(photo.shape)
         gray = to_gray(photo)
         small = self.detector.shrink(gray)
         seen: Exposure = exposure(small, p.segment)

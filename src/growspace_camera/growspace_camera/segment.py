@@ -136,11 +136,14 @@ def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
     """The grid's view of the plane, warped from the photo (float32 BGR).
 
     The photo's chamber region is first shrunk (area interpolation, by a whole factor) to one
-    photo pixel or a little more per grid pixel, so the warp samples without aliasing.
+    photo pixel or a little more per grid pixel, so the warp samples without aliasing. With a
+    calibrated lens, the warp samples through its distortion (``Lens.sample_maps``).
     """
     rows, cols = grid.shape
-    corners = fit.photo_points(grid.xz(np.array([0, 0, rows - 1, rows - 1]),
-                                       np.array([0, cols - 1, cols - 1, 0])))
+    # The grid's outline in the photo (its corners and sides: a barrel lens bows the sides).
+    edge, r, c = np.linspace(0.0, 1.0, 5), rows - 1, cols - 1
+    corners = fit.photo_points(grid.xz(np.r_[edge * r, edge * r, 0 * edge, 0 * edge + r],
+                                       np.r_[0 * edge, 0 * edge + c, edge * c, edge * c]))
     h, w = photo.shape[:2]
     left, top = np.floor(np.clip(corners.min(axis=0) - 4, 0, [w - 1, h - 1])).astype(int)
     right, bottom = np.ceil(np.clip(corners.max(axis=0) + 5, 1, [w, h])).astype(int)
@@ -157,9 +160,14 @@ def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
     # grid pixel -> plane -> photo -> crop -> shrunk crop (pixel centres throughout)
     shrink = np.array([[sx, 0.0, 0.5 * sx - 0.5 - left * sx],
                        [0.0, sy, 0.5 * sy - 0.5 - top * sy], [0.0, 0.0, 1.0]])
-    warp = shrink @ fit.to_photo @ grid.to_plane()
-    out = cv2.warpPerspective(crop, warp, (cols, rows), flags=cv2.INTER_LINEAR
-                              | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    to_photo = fit.to_photo @ grid.to_plane()
+    if fit.lens is None:
+        out = cv2.warpPerspective(crop, shrink @ to_photo, (cols, rows),
+                                  flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                  borderMode=cv2.BORDER_REPLICATE)
+    else:
+        map_x, map_y = fit.lens.sample_maps(to_photo, (cols, rows), shrink)
+        out = cv2.remap(crop, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return out.astype(np.float32)
 
 

@@ -11,8 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
+import numpy as np
 import yaml
 
+from growspace_camera.lens import Lens
 from growspace_camera.markers import MarkerLayout
 from growspace_camera.pipeline import PipelineParams
 from growspace_camera.segment import SegmentParams
@@ -61,6 +63,8 @@ class CameraParams:
                            bounds=Bounds(0, MAX_SEED, integer=True))
     seed: int = seed_param("seed of the first episode's target when no chamber/config came")
     markers: str = param('', 'marker layout YAML; empty = the installed config/markers.yaml')
+    lens: str = param('', "the camera's calibration YAML (ROS camera_calibration's: "
+                      'camera_matrix, distortion_coefficients); empty = no lens distortion')
     pixel_size_m: float = param(0.0025, 'side of a rectified pixel on the plant plane', unit='m',
                                 bounds=Bounds(0.0005, 0.02))
     min_greenness: float = param(0.06, 'lowest excess-green threshold (an empty pot stays '
@@ -118,13 +122,13 @@ class CameraParams:
                                    for f in fields(SegmentParams)})
         tree = TreeParams(**{f.name: getattr(self, f.name) for f in fields(TreeParams)})
         return PipelineParams(layout, segment, tree, self.max_fit_error_m,
-                              self.max_unexplained)
+                              self.max_unexplained, load_lens(self.lens) if self.lens else None)
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 # The settings that change what a photo gives (the rest say where photos come from and how
 # they are published): what ``growspace-camera resegment`` and ``export`` take.
-PIPELINE_FIELDS = ('markers',
+PIPELINE_FIELDS = ('markers', 'lens',
                    *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
                    *(f.name for f in fields(TreeParams)), 'max_fit_error_m',
                    'max_unexplained')
@@ -196,6 +200,30 @@ def load_layout(path: str = '') -> MarkerLayout:
     """
     path = path or default_markers()
     return layout_from_dict(_read_yaml(path, f'markers = {path!r}'), path)
+
+
+def load_lens(path: str) -> Lens:
+    """Read a camera calibration YAML as ROS's camera_calibration writes it (and
+    camera_info_manager reads it): ``image_width``, ``image_height``, ``camera_matrix`` and
+    ``distortion_coefficients`` (each with ``data``), ``distortion_model`` ``plumb_bob`` or
+    ``rational_polynomial``; other keys (rectification, projection) are not used.
+
+    Raises:
+        ParamError: naming the file and what is missing or wrong.
+    """
+    where = f'lens = {path!r}'
+    data = _read_yaml(path, where)
+    model = data.get('distortion_model', 'plumb_bob') if isinstance(data, dict) else None
+    if model not in ('plumb_bob', 'rational_polynomial'):
+        raise ParamError(f'{where}: distortion_model must be plumb_bob or rational_polynomial '
+                         f"(OpenCV's pinhole model), got {model!r}.")
+    try:
+        return Lens(np.reshape(np.asarray(data['camera_matrix']['data'], float), (3, 3)),
+                    np.asarray(data['distortion_coefficients']['data'], float),
+                    (int(data['image_width']), int(data['image_height'])))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ParamError(f'{where}: needs image_width, image_height, camera_matrix.data (9 '
+                         f'numbers) and distortion_coefficients.data ({e}).') from None
 
 
 def _read_yaml(path: str, what: str) -> Any:

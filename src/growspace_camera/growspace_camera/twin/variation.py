@@ -33,7 +33,7 @@ FACTORS = {
     'taper': 'stem widths that taper along each segment and from base to top',
     'leaves': 'blades on petioles at nodes, some drooping across the soil line, some over stems',
     'uneven_light': 'a hot spot and a strong gradient of the photo light, vignetting to 0.6',
-    'lens': 'barrel or pincushion distortion (k1 -0.06 to 0.03), not corrected by the pipeline',
+    'lens': 'barrel or pincushion distortion (k1 -0.06 to 0.03), calibrated once per rig',
     'optics': 'blur to 2.5 px, read noise to 8 DN, shot noise to 0.4, JPEG quality 40-95',
     'camera': 'camera distance (fill 1.08-1.5), tilt to 8 degrees, roll to 6 degrees',
     'markers': 'worn markers (grey black, dull paper); in 3 photos of 10 one partly covered',
