@@ -21,6 +21,11 @@ import numpy as np
 DICTIONARIES = ('DICT_4X4_50', 'DICT_5X5_50', 'DICT_6X6_50')
 DETECT_LONG_SIDE_PX = 1000  # markers are looked for on a copy shrunk by an integer factor to this
 SUBPIX_WINDOW_PX = 3  # half window of the corner refinement on the full photo
+# Markers are first looked for with one adaptive threshold window of this side, about two of a
+# marker's cells on the shrunk copy of a rig framed as docs/hardware.md says (half the time
+# of OpenCV's three windows, and the same markers on 180 twin photos); only when that does
+# not find each marker once are all three tried (worn, low-contrast prints need the 3 px one).
+QUICK_WINDOW_PX = 13
 # Default layout: 6 cm markers 6 cm outside each corner of the 0.84 m chamber square.
 DEFAULT_IDS = (0, 1, 2, 3)
 DEFAULT_CENTRES = ((-0.06, -0.06), (0.90, -0.06), (0.90, 0.90), (-0.06, 0.90))
@@ -124,14 +129,16 @@ class MarkerDetector:
         self.layout = layout
         self._aruco = aruco = aruco or cv2.aruco
         self._dictionary = aruco.getPredefinedDictionary(getattr(aruco, layout.dictionary))
+        self._quick, self._detect = (self._detector(quick) for quick in (True, False))
+
+    def _detector(self, quick: bool):  # noqa: ANN202 - image -> (corners, ids, rejected)
+        aruco = self._aruco
         if hasattr(aruco, 'ArucoDetector'):  # OpenCV 4.7+
-            params = aruco.DetectorParameters()
-            detector = aruco.ArucoDetector(self._dictionary, _tune(params))
-            self._detect = detector.detectMarkers
-        else:  # OpenCV 4.6: the functional API
-            params = _tune(aruco.DetectorParameters_create())
-            self._detect = lambda gray: aruco.detectMarkers(gray, self._dictionary,
-                                                            parameters=params)
+            detector = aruco.ArucoDetector(self._dictionary,
+                                           _tune(aruco.DetectorParameters(), quick))
+            return detector.detectMarkers
+        params = _tune(aruco.DetectorParameters_create(), quick)  # 4.6: the functional API
+        return lambda gray: aruco.detectMarkers(gray, self._dictionary, parameters=params)
 
     @staticmethod
     def shrink(gray: np.ndarray) -> np.ndarray:
@@ -159,7 +166,10 @@ class MarkerDetector:
         """
         small = self.shrink(gray) if small is None else small
         scale = small.shape[1] / gray.shape[1]
-        corners, ids, _ = self._detect(small)
+        corners, ids, _ = self._quick(small)
+        seen = [] if ids is None else np.asarray(ids).reshape(-1).tolist()
+        if sorted(i for i in seen if i in self.layout.ids) != sorted(self.layout.ids):
+            corners, ids, _ = self._detect(small)  # not each marker once: look harder
         if ids is None or len(ids) == 0:
             return []
         found: dict[int, list[np.ndarray]] = {}
@@ -180,10 +190,13 @@ class MarkerDetector:
                 for k, marker_id in enumerate(wanted)]
 
 
-def _tune(params):  # noqa: ANN001, ANN202 - cv2.aruco.DetectorParameters
-    """Read each cell from 8 x 8 samples (OpenCV's default 4 misreads small markers)."""
+def _tune(params, quick: bool = False):  # noqa: ANN001, ANN202 - aruco.DetectorParameters
+    """Read each cell from 8 x 8 samples (OpenCV's default 4 misreads small markers). Quick:
+    one thresholding window (``QUICK_WINDOW_PX``) instead of OpenCV's three (3, 13, 23 px)."""
     params.perspectiveRemovePixelPerCell = 8
     params.perspectiveRemoveIgnoredMarginPerCell = 0.2
+    if quick:
+        params.adaptiveThreshWinSizeMin = params.adaptiveThreshWinSizeMax = QUICK_WINDOW_PX
     return params
 
 
