@@ -13,7 +13,7 @@ import pytest
 
 from growspace_camera.errors import CameraError, NO_PLANT, PLANTS
 from growspace_camera.measure import measured_state, Target
-from growspace_camera.nodes import measure_tree
+from growspace_camera.nodes import measure_tree, PlantTree
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.config import SimConfig
@@ -112,6 +112,18 @@ def test_a_plant_count_the_challenge_cannot_have_is_refused_naming_both_counts()
                        r'challenge has 1 plant\(s\)') as e:
         measured_state(tree, SimConfig(challenge='control'), None, Target(0.4 + 0.5j), 3)
     assert e.value.code == PLANTS
+
+
+def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():
+    # Plant 0 is a root with nothing above it: scored, it would be no plant (reward 0).
+    bare = PlantTree(nodes=np.array([[0.04, 0.0], [0.15, 0.0], [0.15, 0.05], [0.15, 0.1]]),
+                     parent=np.array([-1, -1, 1, 2], np.int32),
+                     plant=np.array([0, 1, 1, 1], np.int16), tips=np.array([3]), plants=2,
+                     tips_pruned=0, skeleton_px=(0, 40), unattached_px=0)
+    with pytest.raises(CameraError, match=r'plant\(s\) \[0\]: a stem base with nothing '
+                       r'measured above it') as e:
+        measured_state(bare, SimConfig(challenge='fairness'), None, Target(0.4 + 0.5j), 3)
+    assert e.value.code == NO_PLANT
 
 
 def test_crossing_branches_still_make_a_tree_of_one_plant():

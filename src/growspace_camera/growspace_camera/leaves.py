@@ -65,11 +65,13 @@ def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching:
             path.append(int(pred[path[-1]]))
         path.reverse()  # from the junction (or base) out to the end
         cut = _leaf_cut(path, arc, radius, widening, petiole_px, blade_px)
-        if cut is None:
+        whole = cut is not None and (cut == 0 or arc[path[cut]] - arc[path[0]] < petiole_px)
+        # A plant's first stem is no leaf: a branch rising from its base (no junction on the
+        # way, as a young plant's stem) keeps it; a bend there widens the mask, not a blade.
+        if cut is None or (whole and pred[path[0]] < 0):
             shoots.append(end)
             continue
         leaves.append(end)
-        whole = cut == 0 or arc[path[cut]] - arc[path[0]] < petiole_px
         for p in path[1:] if whole else path[cut + 1:]:
             removed[p] = True
         if not whole:

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from growspace_camera.errors import BAD_INPUT, CameraError, PLANTS
+from growspace_camera.errors import BAD_INPUT, CameraError, NO_PLANT, PLANTS
 from growspace_camera.nodes import PlantTree
 from growspace_sim.core import kernels
 from growspace_sim.core.chamber import Chamber
@@ -66,6 +66,12 @@ def measured_state(tree: PlantTree, cfg: SimConfig, light: Light, target: Target
     if tree.plants != cfg.plant_count:
         raise CameraError(PLANTS, f'{tree.plants} stem base(s) in the photo, the {cfg.challenge} '
                           f'challenge has {cfg.plant_count} plant(s)')
+    # A plant is at least its first stem: one measured as a base alone would score as no plant
+    # (a reward of 0), a number the photo did not give.
+    bare = sorted(set(range(tree.plants)) - set(tree.plant[tree.plants:].tolist()))
+    if bare:
+        raise CameraError(NO_PLANT, f'plant(s) {bare}: a stem base with nothing measured '
+                          f'above it')
     target.check(cfg)
     if light.spot != cfg.uses_spotlight:
         raise CameraError(BAD_INPUT, f'the {cfg.challenge} challenge has a '
