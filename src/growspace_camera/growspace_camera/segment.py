@@ -24,7 +24,8 @@ EXG_SCALE = 255.0 / 1.5  # ExG in [-1, 2] -> uint8 for OpenCV's Otsu: (ExG + 0.5
 WIDE_KERNEL_M = 0.12  # the first estimate's median window, wider than twice any stem [m]
 SEED_GREENNESS = 0.12  # a region is plant only where some pixel is this green (ExG), at least
 DIM = 0.08  # a pixel darker than this part of the backdrop's grey level has no colour
-FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light
+FLOOD_FRACTION = 0.25  # a greener region larger than this part of the chamber is light ...
+FLOOD_FILL = 0.6  # ... if it fills this much of its bounding box (a band, not a tree)
 NOISE_SIGMAS = 6.0  # greenness this far above the backdrop's noise is plant, whatever Otsu says
 WARM_FROM = 0.015  # warmth (``tissue``) below which a dark pixel is not bark at all
 WARM = 0.04  # ... and from which, this much above, it counts fully as bark
@@ -283,12 +284,17 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
 
 
 def _without_floods(rough: np.ndarray) -> np.ndarray:
-    """A rough mask less its regions wider than ``FLOOD_FRACTION`` of the chamber: before the
-    flat field, the part of the backdrop that the grow lamp does not reach looks green
-    beside the part it does (the photo is balanced on their mix); that is light, not plant."""
+    """A rough mask less its regions wider than ``FLOOD_FRACTION`` of the chamber that fill
+    ``FLOOD_FILL`` of their bounding box: before the flat field, the part of the backdrop that
+    the grow lamp does not reach looks green beside the part it does (the photo is balanced on
+    their mix); that is light, not plant. Such light is a solid band; a plant as large (a
+    leafy tree late in an episode) is branches with backdrop between them, and must stay out
+    of the light's estimate, or it is divided away."""
     count, labels, stats, _ = cv2.connectedComponentsWithStats(rough.view(np.uint8),
                                                                connectivity=8)
-    flood = stats[:, cv2.CC_STAT_AREA] > FLOOD_FRACTION * rough.size
+    area = stats[:, cv2.CC_STAT_AREA]
+    box = stats[:, cv2.CC_STAT_WIDTH] * stats[:, cv2.CC_STAT_HEIGHT]
+    flood = (area > FLOOD_FRACTION * rough.size) & (area > FLOOD_FILL * box)
     flood[0] = False
     return rough & ~flood[labels] if flood.any() else rough
 
