@@ -117,13 +117,20 @@ def test_a_plant_holding_only_leaves_is_still_a_plant():
     assert len(tree.leaf_tips) == 2
 
 
-def test_a_leafy_twin_photo_reports_its_leaves_in_the_measurement_message():
-    grown = grown_by_oracle('control', 'easy', seed=1000, steps=30)
+def measured_on_a_rig(challenge: str, setting: str, steps: int, factor: str):
+    """A chamber grown ``steps`` steps by its oracle (seed 1000), photographed on a rig with
+    ``factor`` alone (the bench's photo of that step), and its measurement."""
+    grown = grown_by_oracle(challenge, setting, seed=1000, steps=steps)
     c = grown.sim.chamber
-    shot = PhotoTwin(MarkerLayout()).photo(c, seed=100030, variation=Variation.only('leaves'),
-                                           rig_seed=1000)
+    shot = PhotoTwin(MarkerLayout()).photo(c, seed=100_000 + steps,
+                                           variation=Variation.only(factor), rig_seed=1000)
     m = Pipeline().measure(shot.bgr, grown.cfg, c.light.copy(), Target(c.target), c.steps)
     assert m.ok, m.error
+    return grown, m
+
+
+def test_a_leafy_twin_photo_reports_its_leaves_in_the_measurement_message():
+    _, m = measured_on_a_rig('control', 'easy', 30, 'leaves')
     msg = measurement_msg(m, 0, 30, 'chamber', 0.0025)
     assert msg.leaves == len(m.tree.leaf_tips) == m.confidence.leaves > 0
     assert msg.tips == m.tree.tips.size
@@ -133,11 +140,6 @@ def test_a_young_plants_bent_stem_is_not_cut_off_as_a_leaf():
     # Fairness hard, 24 steps: the far plant is a short stem bent once; where it bends the mask
     # widens, as a blade does beyond a petiole. Cut off as a leaf, its plant was a bare base
     # scored 0 (the simulator's 0.052).
-    grown = grown_by_oracle('fairness', 'hard', seed=1000, steps=24)
-    c = grown.sim.chamber
-    shot = PhotoTwin(MarkerLayout()).photo(c, seed=100_024, variation=Variation.only('lamp_bands'),
-                                           rig_seed=1000)
-    m = Pipeline().measure(shot.bgr, grown.cfg, c.light.copy(), Target(c.target), c.steps)
-    assert m.ok, m.error
+    grown, m = measured_on_a_rig('fairness', 'hard', 24, 'lamp_bands')
     assert np.bincount(m.tree.plant[m.tree.plants:]).min() >= 2  # both plants grew nodes
     assert abs(m.reward - grown.reward) < 0.005
