@@ -18,7 +18,9 @@ is a blade too, its stalk ending where the branch was last a shoot's width.
 
 The branch is cut where its narrowest stretch before the blade (the petiole, at most
 ``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
-tip. Where what is left is shorter than ``petiole_m``, the whole branch is the leaf.
+tip. Where what is left is shorter than ``petiole_m``, the whole branch is the leaf, unless it
+rises from a stem base: a plant's first stem is never all leaf (where it bends, the mask
+widens as it does beyond a petiole).
 
 Measured on the twin's leafy photos (tuning combinations; docs/hardware.md). Left as they are:
 a blade lying along a stem (no end branch of its own) and a leaf no wider than what holds it.
