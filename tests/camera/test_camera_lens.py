@@ -125,3 +125,23 @@ def test_a_barrel_lens_is_measured_as_a_distortion_free_one_with_its_calibration
     assert measured['calibrated'].fit.check_error_m < 1e-3
     assert measured['calibrated'].fit.check_error_m < 0.5 * measured['as is'].fit.check_error_m
     assert abs(measured['calibrated'].reward - grown.reward) < 0.005  # as is: 0.013 off
+
+
+def test_growspace_camera_measure_takes_the_calibration(tmp_path, capsys):
+    from growspace_camera.cli import main
+    grown = grown_by_oracle('control', 'hard', seed=11, steps=12)
+    lens_only = Variation.only('lens')
+    shot = PhotoTwin(MarkerLayout()).photo(grown.sim.chamber, seed=4, variation=lens_only,
+                                           rig_seed=0)
+    (tmp_path / 'rig.jpg').write_bytes(shot.jpeg)
+    lens = optics.calibration(draw_rig(0, lens_only, 1).distortion_k1, shot.bgr.shape[1::-1])
+    path = calibration_yaml(tmp_path / 'rig.yaml', camera_matrix={
+        'rows': 3, 'cols': 3, 'data': lens.camera_matrix.reshape(-1).tolist()},
+        distortion_coefficients={'rows': 1, 'cols': 5, 'data': lens.distortion.tolist()})
+    assert main(['measure', str(tmp_path / 'rig.jpg'), '--lens', path]) == 0
+    assert 'rig.jpg: reward' in capsys.readouterr().out
+    small = tmp_path / 'small.jpg'  # another size than calibrated: named, not measured
+    small.write_bytes(PhotoTwin(MarkerLayout(), size=(640, 360)).photo(grown.sim.chamber,
+                                                                       seed=4).jpeg)
+    assert main(['measure', str(small), '--lens', path]) == 1
+    assert 'the lens calibration is for 1920 x 1080 px' in capsys.readouterr().out

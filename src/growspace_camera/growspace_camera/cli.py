@@ -67,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     measure.add_argument('--target-z', type=arguments.number(), help='point target z [m]')
     measure.add_argument('--overlay', type=arguments.folder,
                          help='write the segmentation pictures to this folder')
+    measure.add_argument('--lens', type=arguments.existing_file,
+                         help="the camera's calibration YAML (ROS camera_calibration's; "
+                              'default: no lens distortion)')
     for p in (markers, twin, measure):
         p.add_argument('--markers', type=arguments.existing_file,
                        help='marker layout YAML (default: installed)')
@@ -154,7 +157,11 @@ def _measure(layout, cfg: SimConfig, args: argparse.Namespace) -> int:  # noqa: 
     if args.target_x is not None and args.target_z is not None:
         target = complex(args.target_x, args.target_z)
     light = initial_light(cfg, sim.chamber.light.x, sim.chamber.light.z)
-    pipeline = Pipeline(CameraParams().pipeline(layout))
+    try:
+        pipeline = Pipeline(CameraParams(lens=args.lens or '').pipeline(layout))
+    except ParamError as e:
+        print(f'growspace-camera: error: argument --lens: {e}', file=sys.stderr)
+        return 2
     failed = 0
     for path in args.photos:
         try:

@@ -213,7 +213,10 @@ def load_lens(path: str) -> Lens:
     """
     where = f'lens = {path!r}'
     data = _read_yaml(path, where)
-    model = data.get('distortion_model', 'plumb_bob') if isinstance(data, dict) else None
+    if not isinstance(data, dict):
+        raise ParamError(f'{where}: needs a mapping of image_width, image_height, camera_matrix '
+                         f'and distortion_coefficients, got a {type(data).__name__}.')
+    model = data.get('distortion_model', 'plumb_bob')
     if model not in ('plumb_bob', 'rational_polynomial'):
         raise ParamError(f'{where}: distortion_model must be plumb_bob or rational_polynomial '
                          f"(OpenCV's pinhole model), got {model!r}.")
