@@ -59,15 +59,6 @@ def place(rig: Rig, reset_id: int = 1, seed: int = 11) -> None:
     assert rig.results()[-1].info == '', rig.results()[-1].info
 
 
-def idle_reports(rig: Rig, seen: list) -> list:
-    """``seen`` with the controller's status added if it is a new Idle report (each report
-    the controller reads is a new status)."""
-    status = rig.controller.status
-    if status is not None and status.state == 'Idle' and not (seen and seen[-1] is status):
-        seen.append(status)
-    return seen
-
-
 def moves_after(rig: Rig, mark: int) -> list[str]:
     """Lines after ``mark`` that move the machine or light the lamp."""
     return [line for line in rig.grbl.lines[mark:] if line.startswith(('$J', 'M3', 'G0', 'G1'))]
@@ -210,8 +201,15 @@ def test_refused_commands_leave_the_light_where_the_machine_is(tmp_path) -> None
         # The driver trusts where the machine stands once SETTLED_REPORTS Idle reports agree;
         # a step before that jogs to its target even if the machine is there (a loaded
         # machine sent the step first: a jog of no length, which this test does not allow).
-        idle = []
-        assert rig.run_until(lambda: len(idle_reports(rig, idle)) > SETTLED_REPORTS)
+        idle = []  # the Idle reports the controller has read (each is a new status)
+
+        def settled() -> bool:
+            status = rig.controller.status
+            if status is not None and status.state == 'Idle' and not (idle and idle[-1] is status):
+                idle.append(status)
+            return len(idle) > SETTLED_REPORTS
+
+        assert rig.run_until(settled)
         mark = len(rig.grbl.lines)
         assert rig.command(5, mode=convert.MODE_DISCRETE, action=STAY).info == ''
         assert [line for line in moves_after(rig, mark) if line.startswith('$J')] == []

@@ -43,7 +43,7 @@ SHOOT_OF_BLADE = 0.6  # a blade is cut where the branch is back to this part of 
 
 def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching: np.ndarray,
                ends: list[int], removed: np.ndarray, widening: float,
-               petiole_px: float, blade_px: float = 0.0) -> tuple[list[int], list[int]]:
+               petiole_px: float, blade_px: float) -> tuple[list[int], list[int]]:
     """Cut the leaves off the end branches (see the module docstring).
 
     Args:

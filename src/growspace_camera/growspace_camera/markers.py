@@ -166,17 +166,9 @@ class MarkerDetector:
         """
         small = self.shrink(gray) if small is None else small
         scale = small.shape[1] / gray.shape[1]
-        corners, ids, _ = self._quick(small)
-        seen = [] if ids is None else np.asarray(ids).reshape(-1).tolist()
-        if sorted(i for i in seen if i in self.layout.ids) != sorted(self.layout.ids):
-            corners, ids, _ = self._detect(small)  # not each marker once: look harder
-        if ids is None or len(ids) == 0:
-            return []
-        found: dict[int, list[np.ndarray]] = {}
-        for quad, marker_id in zip(corners, np.asarray(ids).reshape(-1)):
-            # Pixel centres: (c + 0.5) / scale - 0.5 maps a small-image position to the photo.
-            points = (np.asarray(quad, np.float64).reshape(4, 2) + 0.5) / scale - 0.5
-            found.setdefault(int(marker_id), []).append(points)
+        found = _by_id(*self._quick(small)[:2], scale)
+        if any(len(found.get(i, ())) != 1 for i in self.layout.ids):
+            found = _by_id(*self._detect(small)[:2], scale)  # not each marker once: look harder
         wanted = [i for i in self.layout.ids if len(found.get(i, ())) == 1]
         if not wanted:
             return []
@@ -188,6 +180,17 @@ class MarkerDetector:
             cv2.cornerSubPix(gray, points, (half, half), (-1, -1), criteria)
         return [Detection(marker_id, points[4 * k:4 * k + 4].astype(np.float64))
                 for k, marker_id in enumerate(wanted)]
+
+
+def _by_id(corners, ids, scale: float) -> dict[int, list[np.ndarray]]:  # noqa: ANN001
+    """OpenCV's detections as marker id -> the corners of each time it was seen, in photo
+    pixels (the detection ran on a copy shrunk by ``scale``)."""
+    found: dict[int, list[np.ndarray]] = {}
+    for quad, marker_id in zip(corners, np.asarray(ids if ids is not None else []).reshape(-1)):
+        # Pixel centres: (c + 0.5) / scale - 0.5 maps a small-image position to the photo.
+        points = (np.asarray(quad, np.float64).reshape(4, 2) + 0.5) / scale - 0.5
+        found.setdefault(int(marker_id), []).append(points)
+    return found
 
 
 def _tune(params, quick: bool = False):  # noqa: ANN001, ANN202 - aruco.DetectorParameters

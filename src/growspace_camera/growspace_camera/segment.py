@@ -142,9 +142,10 @@ def rectify(photo: np.ndarray, fit: PlaneFit, grid: Grid) -> np.ndarray:
     """
     rows, cols = grid.shape
     # The grid's outline in the photo (its corners and sides: a barrel lens bows the sides).
-    edge, r, c = np.linspace(0.0, 1.0, 5), rows - 1, cols - 1
-    corners = fit.photo_points(grid.xz(np.r_[edge * r, edge * r, 0 * edge, 0 * edge + r],
-                                       np.r_[0 * edge, 0 * edge + c, edge * c, edge * c]))
+    along, low = np.linspace(0.0, 1.0, 5), np.zeros(5)
+    side_rows = np.r_[along, along, low, low + 1.0] * (rows - 1)
+    side_cols = np.r_[low, low + 1.0, along, along] * (cols - 1)
+    corners = fit.photo_points(grid.xz(side_rows, side_cols))
     h, w = photo.shape[:2]
     left, top = np.floor(np.clip(corners.min(axis=0) - 4, 0, [w - 1, h - 1])).astype(int)
     right, bottom = np.ceil(np.clip(corners.max(axis=0) + 5, 1, [w, h])).astype(int)
