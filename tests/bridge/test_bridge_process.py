@@ -24,6 +24,7 @@ from growspace_gym_bridge import BridgeTimeout, CommandRejected, NodeDied
 from growspace_gym_bridge.errors import BridgeError
 from growspace_gym_bridge.envs import GrowSpaceBridgeEnv
 from growspace_sim.envs.env import GrowSpaceEnv
+from growspace_sim.node.main import CLOSE_TIMEOUT_S
 
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
 pytestmark = pytest.mark.slow
@@ -139,7 +140,9 @@ ERRORS = [NodeDied('/gs_a', -9, ['last line', 'another'], '/gs_a/step_result (st
           CommandRejected('/gs_a/light/command: step_id 4 refused: error: x = nan ...'),
           BridgeError('sim node /gs_a runs in realtime mode')]
 CLOSE_BOUND_S = 15.0  # close() of a vector env with one dead or stalled node [s]
-GONE_WITHIN_S = 10.0  # a node or worker whose owner died is gone by then [s]
+# A node or worker whose owner died is gone by then [s]: a node's own closing is bounded by
+# CLOSE_TIMEOUT_S, and noticing the death takes a parent poll or two.
+GONE_WITHIN_S = CLOSE_TIMEOUT_S + 5.0
 
 
 @pytest.mark.parametrize('error', ERRORS, ids=lambda e: type(e).__name__)
@@ -232,8 +235,9 @@ import functools, json, sys, time
 import gymnasium as gym
 import growspace_gym_bridge
 if __name__ == '__main__':
-    make = functools.partial(gym.make, 'growspace_gym_bridge:{BRIDGED}')
-    vec = gym.vector.AsyncVectorEnv([make, make], context='spawn')
+    makes = [functools.partial(gym.make, 'growspace_gym_bridge:{BRIDGED}', domain_id=int(d))
+             for d in sys.argv[2:4]]  # a domain each, as _async_bridged
+    vec = gym.vector.AsyncVectorEnv(makes, context='spawn')
     vec.reset(seed=[1, 2])
     pids = list(vec.get_attr('node_pid')) + [p.pid for p in vec.processes]
     print(json.dumps(pids), flush=True)
@@ -244,13 +248,13 @@ if __name__ == '__main__':
 """
 
 
-@pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('victim', ['trainer', 'worker'])
 def test_no_node_outlives_a_killed_trainer_or_worker(victim: str) -> None:
     # trainer: SIGKILL the vector env's process while one node is stalled (SIGSTOP); worker:
     # SIGKILL the worker process that started the first node.
-    trainer = subprocess.Popen([sys.executable, '-c', TRAINER, victim], stdout=subprocess.PIPE,
-                               text=True, env=child_env())
+    domains = [str(next_domain()) for _ in range(2)]
+    trainer = subprocess.Popen([sys.executable, '-c', TRAINER, victim, *domains],
+                               stdout=subprocess.PIPE, text=True, env=child_env())
     pids: list[int] = []
     try:
         pids = json.loads(trainer.stdout.readline())
