@@ -13,7 +13,7 @@ lies beyond ``BLADE_FROM`` of its length and is ``leaf_widening`` times, and at 
 
 A blade whose base lies on the stem, or on a petiole as wide, has no narrower stalk before
 it; but a shoot's end is thin (the simulator's tips are its thinnest segments, 1.3 cm wide
-at its defaults), so an end branch ``leaf_end_m`` (2 cm) wide within ``END_PX`` of its end
+at its defaults), so an end branch ``leaf_end_m`` (1.9 cm) wide within ``END_PX`` of its end
 is a blade too, its stalk ending where the branch was last a shoot's width.
 
 The branch is cut where its narrowest stretch before the blade (the petiole, at most

@@ -98,7 +98,7 @@ class CameraParams:
                                  bounds=Bounds(0.0, 10.0), rule='0 = no leaves are cut')
     petiole_m: float = param(0.025, 'a shoot left shorter than this by a leaf cut is a '
                              'petiole: all leaf', unit='m', bounds=Bounds(0.0, 0.5))
-    leaf_end_m: float = param(0.02, "an end branch this wide near its end is a leaf blade (a "
+    leaf_end_m: float = param(0.019, "an end branch this wide near its end is a leaf blade (a "
                               "shoot's end is thinner)", unit='m', bounds=Bounds(0.0, 0.5),
                               rule='0 = off')
     max_fit_error_m: float = param(0.005, 'largest RMS marker-corner error of a plane fit',

@@ -66,7 +66,7 @@ class TreeParams:
     max_base_tilt_deg: float = 35.0
     leaf_widening: float = 1.5
     petiole_m: float = 0.025
-    leaf_end_m: float = 0.02
+    leaf_end_m: float = 0.019
 
 
 @dataclass
