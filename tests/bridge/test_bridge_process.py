@@ -116,7 +116,8 @@ def _rollout(vec: gym.vector.VectorEnv, steps: int) -> list[tuple]:
 
 @pytest.mark.parametrize('mode', ['sync', 'async'])
 def test_vector_env_of_two_bridged_envs(mode: str) -> None:
-    vec = gym.make_vec(BRIDGED, num_envs=2) if mode == 'sync' else _async_bridged()
+    vec = (gym.make_vec(BRIDGED, num_envs=2, vectorization_mode='sync') if mode == 'sync'
+           else _async_bridged())
     local = gym.make_vec(LOCAL, num_envs=2, vectorization_mode='sync')
     try:
         namespaces = vec.get_attr('namespace')
@@ -177,7 +178,7 @@ def _async_bridged(**kwargs) -> gym.vector.AsyncVectorEnv:
     """Two bridged envs in spawned workers (a forked copy of a process that holds a DDS
     participant hangs), each with its chamber in a ROS domain of its own: the workers close
     together, and a participant torn down while it handles another's departure can hang for
-    good (README, "Failure modes": eProsima/Fast-DDS#6513; seen once in CI with one domain)."""
+    good (README, "Failure modes": eProsima/Fast-DDS#6513; seen twice, once in CI)."""
     # 'module:id' makes a spawned worker import the module that registers the id.
     makes = [functools.partial(gym.make, f'growspace_gym_bridge:{BRIDGED}',
                                domain_id=next_domain(), **kwargs) for _ in range(2)]
