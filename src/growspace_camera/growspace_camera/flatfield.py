@@ -11,6 +11,7 @@ import numpy as np
 BACKDROP_KERNEL_M = 0.08  # the flat field averages the backdrop over this window [m]
 EDGE_KERNEL_M = 0.04  # ... and then follows edges with a median over this window [m]
 MEDIAN_SHRINK = 2  # the flat field's medians run on the chamber shrunk by this factor
+COARSE_SHRINK = 4  # ... and a coarse (``keep_edges=False``) one by this factor
 RATIO_SCALE = 128.0  # a photo-to-light ratio of 1 as uint8 (ratios up to 2 kept)
 LIGHT_FLOOR = 0.35  # a light darker than this part of the backdrop's mean grey is no light
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
@@ -40,7 +41,7 @@ def flat_field(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float,
 
 
 def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m: float,
-                   fill: np.ndarray | None = None) -> np.ndarray | None:
+                   fill: np.ndarray | None = None, keep_edges: bool = True) -> np.ndarray | None:
     """The light falling on the backdrop, estimated away from the plant.
 
     The backdrop is neutral and everywhere behind the plant, so its local colour is the local
@@ -58,6 +59,9 @@ def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m:
         edge_m: Side of the median window [m]: lamp bands narrower than half of it, and
             plant parts wider than half of it that ``exclude`` misses, are not followed.
         fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
+        keep_edges: Keep a lamp's hard edge where it is (``_edge_keeping_median``); False:
+            a coarse estimate (``_coarse_median``, a third of the cost), for a light that is
+            only assumed behind the plant.
 
     Returns:
         The light (float32 BGR), or None where nothing is backdrop.
@@ -74,7 +78,8 @@ def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m:
     filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
     cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
     np.maximum(filled, 1, out=filled)
-    light = _edge_keeping_median(filled, max(3, int(round(edge_m / pixel_m)) | 1))
+    k = max(3, int(round(edge_m / pixel_m)) | 1)
+    light = _edge_keeping_median(filled, k) if keep_edges else _coarse_median(filled, k)
     # A backdrop is never lit this little (vignetting and a lamp's cast take a fraction of the
     # light, not nearly all of it): a light this dark follows a wide dark object (a cabinet
     # post, a pot, soil), and dividing by it would make that object's noise read as colour.
@@ -112,6 +117,37 @@ def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
     return full[:rows, :cols]
 
 
+def _shrunk(image: np.ndarray, f: int, interpolation: int) -> np.ndarray:
+    """``image`` padded (mirrored) to whole multiples of ``f`` and shrunk by ``f``."""
+    rows, cols = image.shape[:2]
+    pad_rows, pad_cols = -rows % f, -cols % f
+    if pad_rows or pad_cols:
+        image = cv2.copyMakeBorder(image, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+    return cv2.resize(image, (image.shape[1] // f, image.shape[0] // f),
+                      interpolation=interpolation)
+
+
+def _median(image: np.ndarray, k: int) -> np.ndarray:
+    """OpenCV's ``k`` x ``k`` median with mirrored borders (``medianBlur`` repeats the edge
+    row, and the chamber's bottom row may hold a little soil)."""
+    h = k // 2
+    return cv2.medianBlur(cv2.copyMakeBorder(image, h, h, h, h, cv2.BORDER_REFLECT_101),
+                          k)[h:-h, h:-h]
+
+
+def _coarse_median(image: np.ndarray, k: int) -> np.ndarray:
+    """A median of about ``k`` x ``k`` pixels of a uint8 BGR image, computed on its block
+    means over ``COARSE_SHRINK`` pixels and enlarged (float32). OpenCV's median of a window
+    wider than 5 pixels costs the same per pixel whatever its width, so a quarter of the
+    pixels is a quarter of the cost; a lamp's edge is smoothed over a shrunk pixel."""
+    rows, cols = image.shape[:2]
+    f = COARSE_SHRINK
+    small = _median(_shrunk(image, f, cv2.INTER_AREA), max(3, int(round(k / f)) | 1))
+    full = cv2.resize(small, (small.shape[1] * f, small.shape[0] * f),
+                      interpolation=cv2.INTER_LINEAR)
+    return full[:rows, :cols].astype(np.float32)
+
+
 def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     """A median of ``k`` x ``k`` pixels of a uint8 BGR image, computed on the image shrunk by
     ``MEDIAN_SHRINK`` (float32): several times cheaper than at full size.
@@ -126,17 +162,10 @@ def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     """
     f = MEDIAN_SHRINK
     rows, cols = image.shape[:2]
-    pad_rows, pad_cols = -rows % f, -cols % f
-    if pad_rows or pad_cols:
-        image = cv2.copyMakeBorder(image, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-    size = (image.shape[1] // f, image.shape[0] // f)
-    small = cv2.resize(image, size, interpolation=cv2.INTER_NEAREST)
-    # Mirrored borders: OpenCV's median repeats the edge row, and the chamber's bottom row
-    # may hold a little soil.
-    kc = max(3, int(round(k / f)) | 1)
-    h = kc // 2
-    small = cv2.medianBlur(cv2.copyMakeBorder(small, h, h, h, h, cv2.BORDER_REFLECT_101),
-                           kc)[h:-h, h:-h]
+    small = _median(_shrunk(image, f, cv2.INTER_NEAREST), max(3, int(round(k / f)) | 1))
+    if small.shape[0] * f != rows or small.shape[1] * f != cols:  # padded to whole blocks
+        image = cv2.copyMakeBorder(image, 0, small.shape[0] * f - rows,
+                                   0, small.shape[1] * f - cols, cv2.BORDER_REFLECT_101)
     near = np.ones((3, 3), np.uint8)
     full = image.shape[1::-1]
     smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)

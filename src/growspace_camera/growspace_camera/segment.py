@@ -246,10 +246,11 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     rough = (rough | (bark > max(_otsu(bark), params.min_greenness))).view(np.uint8)
     rough = _without_floods(cv2.dilate(rough, np.ones((5, 5), np.uint8)).view(bool))
     # Two medians: a wide one gives the light to assume behind what may be plant (a thick
-    # trunk is less than half of its window), a narrow one follows the lamp's bands. What only
+    # trunk is less than half of its window; coarse, as only a guess behind the plant needs
+    # to be), a narrow one follows the lamp's bands and edges. What only
     # the wide one's division shows as tissue is not left out of the narrow one: that is
     # mostly the backdrop between lamp bands, which the wide median did not follow.
-    light = backdrop_light(bgr, rough, params.pixel_m, WIDE_KERNEL_M)
+    light = backdrop_light(bgr, rough, params.pixel_m, WIDE_KERNEL_M, keep_edges=False)
     flat, level = flat_field(bgr, rough, params.pixel_m, fill=light)
     flat = cv2.GaussianBlur(flat, (3, 3), 0)
     green = greenness(flat)
