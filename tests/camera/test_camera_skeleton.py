@@ -7,6 +7,8 @@ numbers.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ import pytest
 from growspace_camera.errors import CameraError, NO_PLANT, PLANTS
 from growspace_camera.measure import measured_state, Target
 from growspace_camera.nodes import measure_tree, PlantTree
+from growspace_camera.pipeline import check_shares
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.config import SimConfig
@@ -112,6 +115,37 @@ def test_a_plant_count_the_challenge_cannot_have_is_refused_naming_both_counts()
                        r'challenge has 1 plant\(s\)') as e:
         measured_state(tree, SimConfig(challenge='control'), None, Target(0.4 + 0.5j), 3)
     assert e.value.code == PLANTS
+
+
+def two_plants(skeleton_px: tuple[int, int], stem_radius_m: tuple[float, float]) -> PlantTree:
+    return PlantTree(nodes=np.array([[0.04, 0.0], [0.15, 0.0]]), parent=np.array([-1, -1]),
+                     plant=np.array([0, 1], np.int16), tips=np.zeros(0, np.int64), plants=2,
+                     tips_pruned=0, skeleton_px=skeleton_px, unattached_px=0,
+                     stem_radius_m=stem_radius_m)
+
+
+def test_plants_whose_shares_follow_their_stems_pass_the_share_check():
+    # Radii 5 and 3.5 mm: cubed, 0.74 and 0.26 of the two; skeleton shares 0.75 and 0.25.
+    check_shares(two_plants((300, 100), (0.005, 0.0035)))
+    check_shares(two_plants((100, 300), (0.005, float('nan'))))  # a plant below the band
+    check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), plants=1,
+                         skeleton_px=(100,), stem_radius_m=(0.005,)))  # one plant: no shares
+
+
+def test_plants_whose_shares_contradict_their_stems_are_refused_naming_both():
+    # The thick stem holds a quarter of the skeleton, the thin one three quarters: one
+    # plant's crown was handed to the other where they touch.
+    with pytest.raises(CameraError, match=r'shares of the skeleton are 0\.25, 0\.75, their '
+                       r'stems \(radii 5\.0, 3\.5 mm, cubed\) say 0\.74, 0\.26, more '
+                       r'than 0\.25 apart') as e:
+        check_shares(two_plants((100, 300), (0.005, 0.0035)))
+    assert e.value.code == PLANTS
+
+
+def test_each_plants_stem_radius_is_read_above_the_floor():
+    tree = tree_of(mask_of([(0.05, 0.0), (0.05, 0.17)], width_m=0.016)
+                   | mask_of([(0.15, 0.0), (0.15, 0.17)], width_m=0.008))
+    assert tree.stem_radius_m == pytest.approx((0.008, 0.004), abs=GRID.pixel_m)
 
 
 def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():

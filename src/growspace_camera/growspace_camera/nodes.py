@@ -18,12 +18,13 @@ import cv2
 import numpy as np
 
 from growspace_camera.segment import Grid
-from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
+from growspace_camera.skeleton import owners, skeleton_graph, SkeletonGraph, TreeParams
 
 DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
 CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
+STEM_BAND_M = (0.03, 0.08)  # a plant's stem radius is read this high up its first stem [m]
 
 
 @dataclass
@@ -42,6 +43,8 @@ class PlantTree:
         unexplained_px: Mask pixels in pieces of the mask that hold no stem base.
         leaf_tips: (L, 2) float64 ends of the leaves cut off the shoots (x, z) [m]: not
             tips of the simulator's kind, so no reward counts them (``leaves``).
+        stem_radius_m: Per plant, the radius of its stem ``STEM_BAND_M`` above the floor
+            (the median over its skeleton there) [m]; NaN for a plant with no skeleton there.
     """
 
     nodes: np.ndarray
@@ -54,6 +57,7 @@ class PlantTree:
     unattached_px: int
     unexplained_px: int = 0
     leaf_tips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    stem_radius_m: tuple[float, ...] = ()
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
@@ -90,7 +94,16 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
                      np.array(builder.parent, np.int32), plant,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
                      tuple(int(v) for v in lengths), g.unattached, g.unexplained,
-                     g.xz[g.leaf_ends].reshape(-1, 2))
+                     g.xz[g.leaf_ends].reshape(-1, 2), _stem_radii(g, grid.pixel_m))
+
+
+def _stem_radii(g: SkeletonGraph, pixel_m: float) -> tuple[float, ...]:
+    """Each plant's stem radius ``STEM_BAND_M`` above the floor [m] (NaN: not that tall)."""
+    owner = owners(g.order, g.pred, g.roots)
+    low, high = (h / pixel_m for h in STEM_BAND_M)
+    band = (g.arc > low) & (g.arc < high) & ~g.removed
+    return tuple(float(np.median(g.radius[band & (owner == p)])) * pixel_m
+                 if np.any(band & (owner == p)) else float('nan') for p in range(g.roots.size))
 
 
 def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.ndarray:

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from growspace_camera.calibration import Calibrator, FitReport
-from growspace_camera.errors import BAD_INPUT, CameraError, UNEXPLAINED
+from growspace_camera.errors import BAD_INPUT, CameraError, PLANTS, UNEXPLAINED
 from growspace_camera.lens import Lens
 from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to_gray
 from growspace_camera.measure import measured_state, Observer, score, Target
@@ -29,6 +29,10 @@ from growspace_sim.core.light import Light
 from growspace_sim.core.state import ChamberState
 
 MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_node's width)
+# Plants' shares of the skeleton this far from their stems' (``check_shares``) are refused.
+# On the twin's development photos of two plants (tuning combinations and the old twin, 144)
+# the largest gap of a right measurement is 0.14; one plant's crown handed to the other: 0.35.
+MAX_SHARE_GAP = 0.25
 
 @dataclass(frozen=True)
 class PipelineParams:
@@ -195,6 +199,7 @@ class Pipeline:
         clock.lap('skeleton')
         check_explained(tree, c.plant_pixels, p.max_unexplained)
         out.state = state = measured_state(tree, cfg, light, target, steps)
+        check_shares(tree)  # (once the plant count is the challenge's)
         reward, plant_rewards, success = score(state, cfg)
         out.reward, out.plant_rewards, out.success = float(reward), plant_rewards, bool(success)
         clock.lap('reward')
@@ -213,6 +218,29 @@ def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) 
                           f'{plant_pixels} mask pixels reach no stem base (max_unexplained = '
                           f'{max_unexplained:g}); a stem the mask missed (brown, woody, '
                           f'hidden) or green that is not plant')
+
+
+def check_shares(tree: PlantTree, max_gap: float = MAX_SHARE_GAP) -> None:
+    """Raises CameraError ``PLANTS`` when the plants' shares of the skeleton contradict their
+    stems: a stem thickens with what it carries (the simulator's segments as the cube root of
+    their descendants; real stems by the pipe model), so each plant's share of the skeleton
+    should be near its stem's radius cubed over all of theirs. Where two plants touch (a
+    branch or a leaf lying on the other plant's stem), the skeleton's shortest paths can hand
+    one plant's crown to the other: its reward is then a confident wrong number."""
+    radius = np.asarray(tree.stem_radius_m, float)
+    length = np.asarray(tree.skeleton_px, float)
+    if tree.plants < 2 or np.isnan(radius).any() or length.sum() == 0:
+        return
+    stems = radius ** 3 / np.sum(radius ** 3)
+    shares = length / length.sum()
+    if np.abs(shares - stems).max() > max_gap:
+        def listed(values: np.ndarray) -> str:
+            return ', '.join(f'{v:.2f}' for v in values)
+        raise CameraError(PLANTS, f'the plants measured do not match their stems: their '
+                          f'shares of the skeleton are {listed(shares)}, their stems (radii '
+                          f'{", ".join(f"{1000 * r:.1f}" for r in radius)} mm, cubed) say '
+                          f'{listed(stems)}, more than {max_gap:g} apart; plants that touch '
+                          f"(a branch or a leaf on the other plant's stem) shared out wrongly")
 
 
 def check_photo(photo: object) -> None:

@@ -193,7 +193,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         # Every plant grows up to a tip of its own. A leaf drooping from a stem onto the floor
         # meets it at its blade's end (no tip there), and the stem's base, over the thicker
         # and shorter way, reaches its petiole first: the leaf's contact has no tip.
-        owner = _owners(order, pred, roots)
+        owner = owners(order, pred, roots)
         barren = np.ones(roots.size, bool)
         barren[owner[ends + leaf_ends]] = False  # (a seedling may hold leaves alone)
         if not barren.any() or barren.all():
@@ -318,7 +318,7 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     """Drop bases whose skeleton reaches less than ``min_px`` of arc length (a speck of green
     on the soil line is not a plant: every plant has its first stem); their pixels become
     unattached."""
-    base = _owners(order, pred, roots)
+    base = owners(order, pred, roots)
     height = np.zeros(roots.size)
     np.maximum.at(height, base[order], arc[order])
     keep = height >= min_px
@@ -330,7 +330,7 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     return roots[keep], root_cols[keep], order, reached
 
 
-def _owners(order: np.ndarray, pred: np.ndarray, roots: np.ndarray) -> np.ndarray:
+def owners(order: np.ndarray, pred: np.ndarray, roots: np.ndarray) -> np.ndarray:
     """Each pixel's base (an index into ``roots``; -1 for a pixel no base reaches)."""
     base = np.full(pred.size, -1, np.int64)
     base[roots] = np.arange(roots.size)
