@@ -120,10 +120,6 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
     ('leafy_side_view', 'tips', ''):
         f'{ITEM3}: measured as one plant, but the top shoot and two leaf ends have no tip within '
         "2 cm (the skeleton's ends fall short of them; the drooping leaves end at the floor)",
-    ('top_view', 'outcome', ''):
-        f'{ITEM4}: accepted (reward 0.833), its radiating leaves read as one plant standing on '
-        'the leaf that crosses the soil line. It was refused only while a plant a quarter of '
-        'the chamber large was taken for lamp light, which divided big twin plants away',
     ('seedling_thin_leaves', 'tips', ''):
         f'{ITEM2} and {ITEM3}: accepted (reward 0.073; {ITEM4}) with the ends of both '
         'thin left leaves lost (no tip there) and a tip at the cut base',

@@ -13,10 +13,10 @@ import cv2
 import numpy as np
 import pytest
 
-from growspace_camera.errors import CameraError, NO_PLANT, PLANTS
+from growspace_camera.errors import CameraError, NO_PLANT, PLANTS, UNEXPLAINED
 from growspace_camera.measure import measured_state, Target
 from growspace_camera.nodes import measure_tree, PlantTree
-from growspace_camera.pipeline import check_shares
+from growspace_camera.pipeline import check_loops, check_shares
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.config import SimConfig
@@ -146,6 +146,22 @@ def test_each_plants_stem_radius_is_read_above_the_floor():
     tree = tree_of(mask_of([(0.05, 0.0), (0.05, 0.17)], width_m=0.016)
                    | mask_of([(0.15, 0.0), (0.15, 0.17)], width_m=0.008))
     assert tree.stem_radius_m == pytest.approx((0.008, 0.004), abs=GRID.pixel_m)
+
+
+def test_the_loops_of_a_mask_are_its_holes_and_a_net_of_them_is_refused():
+    stem = mask_of([(0.1, 0.0), (0.1, 0.18)])
+    assert tree_of(stem).loops == 0
+    # Two twigs that leave the stem and join it again, one each side: two pieces of backdrop
+    # enclosed.
+    crossed = stem | mask_of([(0.1, 0.05), (0.16, 0.12), (0.1, 0.16)],
+                             [(0.1, 0.07), (0.04, 0.12), (0.1, 0.15)], width_m=0.006)
+    tree = tree_of(crossed)
+    assert tree.loops == 2
+    check_loops(tree)
+    with pytest.raises(CameraError, match=r'the plant mask is a net of 2 loops \(more than 1\)'
+                       ) as e:
+        check_loops(tree, max_loops=1)
+    assert e.value.code == UNEXPLAINED
 
 
 def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():

@@ -238,7 +238,7 @@ class CameraNode:
                 'markers_seen': ' '.join(str(i) for i in conf.markers_seen),
                 'fit_held': str(conf.fit_held).lower(), 'fit_age': str(conf.fit_age),
                 'plant_pixels': str(conf.plant_pixels), 'tips': str(conf.tips),
-                'unexplained': f'{conf.unexplained:.3f}',
+                'unexplained': f'{conf.unexplained:.3f}', 'loops': str(conf.loops),
                 'processing_ms': f'{last.timings_ms.get("total", 0.0):.1f}'})
         kv = [types.new('diagnostic_msgs/msg/KeyValue', key=k, value=v)
               for k, v in values.items()]

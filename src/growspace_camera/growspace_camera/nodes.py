@@ -45,6 +45,8 @@ class PlantTree:
             tips of the simulator's kind, so no reward counts them (``leaves``).
         stem_radius_m: Per plant, the radius of its stem ``STEM_BAND_M`` above the floor
             (the median over its skeleton there) [m]; NaN for a plant with no skeleton there.
+        loops: Holes in the mask (backdrop it encloses): each is a loop in the skeleton,
+            where branches or leaves cross in the photo, and a guess at which is which.
     """
 
     nodes: np.ndarray
@@ -58,6 +60,7 @@ class PlantTree:
     unexplained_px: int = 0
     leaf_tips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     stem_radius_m: tuple[float, ...] = ()
+    loops: int = 0
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
@@ -94,7 +97,20 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
                      np.array(builder.parent, np.int32), plant,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
                      tuple(int(v) for v in lengths), g.unattached, g.unexplained,
-                     g.xz[g.leaf_ends].reshape(-1, 2), _stem_radii(g, grid.pixel_m))
+                     g.xz[g.leaf_ends].reshape(-1, 2), _stem_radii(g, grid.pixel_m),
+                     _loops(mask))
+
+
+def _loops(mask: np.ndarray) -> int:
+    """Holes in a mask: pieces of its backdrop (4-connected, as the 8-connected skeleton
+    goes round them) that do not reach the edge of its bounding box."""
+    left, top, width, height = cv2.boundingRect(mask.view(np.uint8))
+    if width < 3 or height < 3:
+        return 0
+    backdrop = ~mask[top:top + height, left:left + width]
+    count, labels = cv2.connectedComponents(backdrop.view(np.uint8), connectivity=4)
+    edge = np.unique(np.concatenate((labels[0], labels[-1], labels[:, 0], labels[:, -1])))
+    return count - 1 - int(np.count_nonzero(edge))  # label 0 is the plant
 
 
 def _stem_radii(g: SkeletonGraph, pixel_m: float) -> tuple[float, ...]:

@@ -33,6 +33,11 @@ MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_n
 # On the twin's development photos of two plants (tuning combinations and the old twin, 144)
 # the largest gap of a right measurement is 0.14; one plant's crown handed to the other: 0.35.
 MAX_SHARE_GAP = 0.25
+# A mask with more loops than this (``check_loops``) is refused. Plants seen from the side
+# cross themselves a few times: the twin's development photos (576, steps 6-50, tuning
+# combinations and the old twin) at most 9, a real small tree in leaf 12; a top view's blades,
+# overlapping round its centre, 46.
+MAX_LOOPS = 20
 
 @dataclass(frozen=True)
 class PipelineParams:
@@ -71,6 +76,7 @@ class Confidence:
         skeleton_px: Skeleton pixels per plant.
         unattached_px: Skeleton pixels no stem base reaches.
         unexplained: Fraction of the plant mask in pieces that hold no stem base [0-1].
+        loops: Holes in the plant mask (where branches or leaves cross in the photo).
         tips: Tips measured.
         tips_pruned: Skeleton end points dropped as spurs.
         leaves: Leaves cut off the shoots (their ends are not tips).
@@ -89,6 +95,7 @@ class Confidence:
     skeleton_px: tuple[int, ...] = ()
     unattached_px: int = 0
     unexplained: float = float('nan')
+    loops: int = 0
     tips: int = 0
     tips_pruned: int = 0
     leaves: int = 0
@@ -196,8 +203,10 @@ class Pipeline:
         c.tips, c.tips_pruned = int(tree.tips.size), tree.tips_pruned
         c.leaves = len(tree.leaf_tips)
         c.unexplained = tree.unexplained_px / max(c.plant_pixels, 1)
+        c.loops = tree.loops
         clock.lap('skeleton')
         check_explained(tree, c.plant_pixels, p.max_unexplained)
+        check_loops(tree)
         out.state = state = measured_state(tree, cfg, light, target, steps)
         check_shares(tree)  # (once the plant count is the challenge's)
         reward, plant_rewards, success = score(state, cfg)
@@ -218,6 +227,16 @@ def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) 
                           f'{plant_pixels} mask pixels reach no stem base (max_unexplained = '
                           f'{max_unexplained:g}); a stem the mask missed (brown, woody, '
                           f'hidden) or green that is not plant')
+
+
+def check_loops(tree: PlantTree, max_loops: int = MAX_LOOPS) -> None:
+    """Raises CameraError ``UNEXPLAINED`` when the plant mask is a net of more than
+    ``max_loops`` loops: each loop is a crossing whose branches the skeleton must guess, and
+    so many are no plant seen from the side (a top view, a tangle, a dense mat of leaves)."""
+    if tree.loops > max_loops:
+        raise CameraError(UNEXPLAINED, f'the plant mask is a net of {tree.loops} loops (more '
+                          f'than {max_loops}): not a plant seen from the side, whose branches '
+                          f'cross a few times (a top view, a tangle or a mat of leaves)')
 
 
 def check_shares(tree: PlantTree, max_gap: float = MAX_SHARE_GAP) -> None:
