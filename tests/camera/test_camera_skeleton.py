@@ -121,7 +121,7 @@ def two_plants(skeleton_px: tuple[int, int], stem_radius_m: tuple[float, float])
     return PlantTree(nodes=np.array([[0.04, 0.0], [0.15, 0.0]]), parent=np.array([-1, -1]),
                      plant=np.array([0, 1], np.int16), tips=np.zeros(0, np.int64), plants=2,
                      tips_pruned=0, skeleton_px=skeleton_px, unattached_px=0,
-                     stem_radius_m=stem_radius_m)
+                     stem_radius_m=stem_radius_m, piece=(1, 1))
 
 
 def test_plants_whose_shares_follow_their_stems_pass_the_share_check():
@@ -129,7 +129,9 @@ def test_plants_whose_shares_follow_their_stems_pass_the_share_check():
     check_shares(two_plants((300, 100), (0.005, 0.0035)))
     check_shares(two_plants((100, 300), (0.005, float('nan'))))  # a plant below the band
     check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), plants=1,
-                         skeleton_px=(100,), stem_radius_m=(0.005,)))  # one plant: no shares
+                         skeleton_px=(100,), stem_radius_m=(0.005,), piece=(1,)))  # one plant
+    # Plants that do not touch cannot be shared out wrongly: their stems are not compared.
+    check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), piece=(1, 2)))
 
 
 def test_plants_whose_shares_contradict_their_stems_are_refused_naming_both():
@@ -146,6 +148,10 @@ def test_each_plants_stem_radius_is_read_above_the_floor():
     tree = tree_of(mask_of([(0.05, 0.0), (0.05, 0.17)], width_m=0.016)
                    | mask_of([(0.15, 0.0), (0.15, 0.17)], width_m=0.008))
     assert tree.stem_radius_m == pytest.approx((0.008, 0.004), abs=GRID.pixel_m)
+    assert tree.piece[0] != tree.piece[1]  # apart
+    joined = tree_of(mask_of([(0.05, 0.0), (0.05, 0.17)], [(0.15, 0.0), (0.15, 0.17)],
+                             [(0.05, 0.12), (0.15, 0.12)]))
+    assert joined.plants == 2 and joined.piece[0] == joined.piece[1]  # a branch joins them
 
 
 def test_the_loops_of_a_mask_are_its_holes_and_a_net_of_them_is_refused():

@@ -47,6 +47,8 @@ class PlantTree:
             (the median over its skeleton there) [m]; NaN for a plant with no skeleton there.
         loops: Holes in the mask (backdrop it encloses): each is a loop in the skeleton,
             where branches or leaves cross in the photo, and a guess at which is which.
+        piece: Per plant, the piece of the mask (8-connected) its stem base stands in:
+            plants in one piece touch, and only they can be shared out wrongly.
     """
 
     nodes: np.ndarray
@@ -61,6 +63,7 @@ class PlantTree:
     leaf_tips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     stem_radius_m: tuple[float, ...] = ()
     loops: int = 0
+    piece: tuple[int, ...] = ()
 
 
 def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
@@ -98,7 +101,13 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
                      tuple(int(v) for v in lengths), g.unattached, g.unexplained,
                      g.xz[g.leaf_ends].reshape(-1, 2), _stem_radii(g, grid.pixel_m),
-                     _loops(mask))
+                     _loops(mask), _pieces(mask, g.rows[g.roots], g.cols[g.roots]))
+
+
+def _pieces(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[int, ...]:
+    """The 8-connected piece of ``mask`` each pixel (``rows``, ``cols``) lies in."""
+    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    return tuple(int(v) for v in labels[rows, cols])
 
 
 def _loops(mask: np.ndarray) -> int:
