@@ -60,8 +60,8 @@ def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m:
             plant parts wider than half of it that ``exclude`` misses, are not followed.
         fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
         keep_edges: Keep a lamp's hard edge where it is (``_edge_keeping_median``); False:
-            a coarse estimate (``_coarse_median``, a third of the cost), for a light that is
-            only assumed behind the plant.
+            a coarse estimate (``_coarse_median``, about a quarter of the cost), for a
+            light that is only assumed behind the plant.
 
     Returns:
         The light (float32 BGR), or None where nothing is backdrop.

@@ -123,7 +123,7 @@ def _loops(mask: np.ndarray) -> int:
 
 
 def _stem_radii(g: SkeletonGraph, pixel_m: float) -> tuple[float, ...]:
-    """Each plant's stem radius ``STEM_BAND_M`` above the floor [m] (NaN: not that tall)."""
+    """Each plant's stem radius ``STEM_BAND_M`` above the floor [m] (NaN: no skeleton there)."""
     owner = owners(g.order, g.pred, g.roots)
     low, high = (h / pixel_m for h in STEM_BAND_M)
     band = (g.arc > low) & (g.arc < high) & ~g.removed

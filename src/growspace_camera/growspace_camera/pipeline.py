@@ -40,6 +40,7 @@ MAX_SHARE_GAP = 0.25
 # overlapping round its centre, 46.
 MAX_LOOPS = 20
 
+
 @dataclass(frozen=True)
 class PipelineParams:
     """Everything the pipeline accepts (camera_node's parameters of the same names)."""
