@@ -32,7 +32,7 @@ MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_n
 # Touching plants whose shares of the skeleton are this far from their stems' (``check_shares``)
 # are refused. Twin development photos of two touching plants (fairness, oracle, every step:
 # 209 of 28 episodes): of the 8 beyond 0.25, 5 had a reward off by more than 0.05; of the 201
-# within it, 16 (stems differ per plant too: the twin draws them 0.85-1.2 times as wide).
+# within it, 14 (stems differ per plant too: the twin draws them 0.85-1.2 times as wide).
 MAX_SHARE_GAP = 0.25
 # A mask with more loops than this (``check_loops``) is refused. Plants seen from the side
 # cross themselves a few times: the twin's development photos (576, steps 6-50, tuning
