@@ -16,7 +16,7 @@ import pytest
 from growspace_camera.errors import CameraError, NO_PLANT, PLANTS, UNEXPLAINED
 from growspace_camera.measure import measured_state, Target
 from growspace_camera.nodes import measure_tree, PlantTree
-from growspace_camera.pipeline import check_loops, check_shares
+from growspace_camera.pipeline import check_loops, check_shares, PipelineParams
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.config import SimConfig
@@ -126,12 +126,14 @@ def two_plants(skeleton_px: tuple[int, int], stem_radius_m: tuple[float, float])
 
 def test_plants_whose_shares_follow_their_stems_pass_the_share_check():
     # Radii 5 and 3.5 mm: cubed, 0.74 and 0.26 of the two; skeleton shares 0.75 and 0.25.
-    check_shares(two_plants((300, 100), (0.005, 0.0035)))
-    check_shares(two_plants((100, 300), (0.005, float('nan'))))  # a plant below the band
+    gap = PipelineParams().max_share_gap
+    check_shares(two_plants((300, 100), (0.005, 0.0035)), gap)
+    check_shares(two_plants((100, 300), (0.005, float('nan'))), gap)  # a plant below the band
     check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), plants=1,
-                         skeleton_px=(100,), stem_radius_m=(0.005,), piece=(1,)))  # one plant
+                         skeleton_px=(100,), stem_radius_m=(0.005,), piece=(1,)), gap)
     # Plants that do not touch cannot be shared out wrongly: their stems are not compared.
-    check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), piece=(1, 2)))
+    check_shares(replace(two_plants((100, 300), (0.005, 0.0035)), piece=(1, 2)), gap)
+    check_shares(two_plants((100, 300), (0.005, 0.0035)), max_gap=0.5)  # a rig's own gap
 
 
 def test_plants_whose_shares_contradict_their_stems_are_refused_naming_both():
@@ -139,8 +141,8 @@ def test_plants_whose_shares_contradict_their_stems_are_refused_naming_both():
     # plant's crown was handed to the other where they touch.
     with pytest.raises(CameraError, match=r'shares of the skeleton are 0\.25, 0\.75, their '
                        r'stems \(radii 5\.0, 3\.5 mm, cubed\) say 0\.74, 0\.26, more '
-                       r'than 0\.25 apart') as e:
-        check_shares(two_plants((100, 300), (0.005, 0.0035)))
+                       r'than max_share_gap = 0\.25 apart') as e:
+        check_shares(two_plants((100, 300), (0.005, 0.0035)), PipelineParams().max_share_gap)
     assert e.value.code == PLANTS
 
 
@@ -163,9 +165,9 @@ def test_the_loops_of_a_mask_are_its_holes_and_a_net_of_them_is_refused():
                              [(0.1, 0.07), (0.04, 0.12), (0.1, 0.15)], width_m=0.006)
     tree = tree_of(crossed)
     assert tree.loops == 2
-    check_loops(tree)
-    with pytest.raises(CameraError, match=r'the plant mask is a net of 2 loops \(more than 1\)'
-                       ) as e:
+    check_loops(tree, PipelineParams().max_loops)
+    with pytest.raises(CameraError, match=r'the plant mask is a net of 2 loops '
+                       r'\(max_loops = 1\)') as e:
         check_loops(tree, max_loops=1)
     assert e.value.code == UNEXPLAINED
 

@@ -29,16 +29,6 @@ from growspace_sim.core.light import Light
 from growspace_sim.core.state import ChamberState
 
 MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_node's width)
-# Touching plants whose shares of the skeleton are this far from their stems' (``check_shares``)
-# are refused. Twin development photos of two touching plants (fairness, oracle, every step:
-# 209 of 28 episodes): of the 8 beyond 0.25, 5 had a reward off by more than 0.05; of the 201
-# within it, 14 (stems differ per plant too: the twin draws them 0.85-1.2 times as wide).
-MAX_SHARE_GAP = 0.25
-# A mask with more loops than this (``check_loops``) is refused. Plants seen from the side
-# cross themselves a few times: the twin's development photos (576, steps 6-50, tuning
-# combinations and the old twin) at most 9, a real small tree in leaf 12; a top view's blades,
-# overlapping round its centre, 46.
-MAX_LOOPS = 20
 
 
 @dataclass(frozen=True)
@@ -58,6 +48,16 @@ class PipelineParams:
     # the mask); on the twin's fidelity photos of grown plants it is 0 (docs/hardware.md).
     max_unexplained: float = 0.5
     lens: Lens | None = None  # the camera's calibration; None: a distortion-free lens
+    # Most loops (holes) in the plant mask (``check_loops``). Plants seen from the side cross
+    # themselves a few times: the twin's development photos (576, steps 6-50, tuning
+    # combinations and the old twin) at most 9, a real small tree in leaf 12; a top view's
+    # blades, overlapping round its centre, 46.
+    max_loops: int = 20
+    # Largest gap between touching plants' shares of the skeleton and their stems'
+    # (``check_shares``). Twin development photos of two touching plants (fairness, oracle,
+    # every step: 209 of 28 episodes): of the 8 beyond 0.25, 5 had a reward off by more than
+    # 0.05; of the 201 within it, 14 (the twin draws each plant's stems 0.85-1.2 times as wide).
+    max_share_gap: float = 0.25
 
 
 @dataclass
@@ -208,9 +208,9 @@ class Pipeline:
         c.loops = tree.loops
         clock.lap('skeleton')
         check_explained(tree, c.plant_pixels, p.max_unexplained)
-        check_loops(tree)
+        check_loops(tree, p.max_loops)
         out.state = state = measured_state(tree, cfg, light, target, steps)
-        check_shares(tree)  # (once the plant count is the challenge's)
+        check_shares(tree, p.max_share_gap)  # (once the plant count is the challenge's)
         reward, plant_rewards, success = score(state, cfg)
         out.reward, out.plant_rewards, out.success = float(reward), plant_rewards, bool(success)
         clock.lap('reward')
@@ -231,17 +231,17 @@ def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) 
                           f'hidden) or green that is not plant')
 
 
-def check_loops(tree: PlantTree, max_loops: int = MAX_LOOPS) -> None:
+def check_loops(tree: PlantTree, max_loops: int) -> None:
     """Raises CameraError ``UNEXPLAINED`` when the plant mask is a net of more than
     ``max_loops`` loops: each loop is a crossing whose branches the skeleton must guess, and
     so many are no plant seen from the side (a top view, a tangle, a dense mat of leaves)."""
     if tree.loops > max_loops:
-        raise CameraError(UNEXPLAINED, f'the plant mask is a net of {tree.loops} loops (more '
-                          f'than {max_loops}): not a plant seen from the side, whose branches '
-                          f'cross a few times (a top view, a tangle or a mat of leaves)')
+        raise CameraError(UNEXPLAINED, f'the plant mask is a net of {tree.loops} loops '
+                          f'(max_loops = {max_loops}): not a plant seen from the side, whose '
+                          f'branches cross a few times (a top view, a tangle or a mat of leaves)')
 
 
-def check_shares(tree: PlantTree, max_gap: float = MAX_SHARE_GAP) -> None:
+def check_shares(tree: PlantTree, max_gap: float) -> None:
     """Raises CameraError ``PLANTS`` when the plants' shares of the skeleton contradict their
     stems: a stem thickens with what it carries (the simulator's segments as the cube root of
     their descendants; real stems by the pipe model), so each plant's share of the skeleton
@@ -269,7 +269,8 @@ def _check_shares(radius: np.ndarray, length: np.ndarray, max_gap: float) -> Non
         raise CameraError(PLANTS, f'the plants measured do not match their stems: their '
                           f'shares of the skeleton are {listed(shares)}, their stems (radii '
                           f'{", ".join(f"{1000 * r:.1f}" for r in radius)} mm, cubed) say '
-                          f'{listed(stems)}, more than {max_gap:g} apart; plants that touch '
+                          f'{listed(stems)}, more than max_share_gap = {max_gap:g} apart; '
+                          f'plants that touch '
                           f"(a branch or a leaf on the other plant's stem) shared out wrongly")
 
 

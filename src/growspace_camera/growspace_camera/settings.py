@@ -106,6 +106,12 @@ class CameraParams:
     max_unexplained: float = param(0.5, 'largest share of the plant mask in pieces that hold '
                                    'no stem base; more: the photo is refused (unexplained)',
                                    unit='fraction', bounds=Bounds(0.0, 1.0))
+    max_loops: int = param(20, 'most loops (holes) in the plant mask, where branches and '
+                           'leaves cross; more: the photo is refused (unexplained)',
+                           bounds=Bounds(0, 100000, integer=True))
+    max_share_gap: float = param(0.25, "largest gap between touching plants' shares of the "
+                                 "skeleton and their stems' (radius cubed); more: the photo "
+                                 'is refused (plants)', unit='fraction', bounds=Bounds(0.0, 1.0))
     segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',
                                       unit='1', bounds=Bounds(0.05, 1.0))
     frame_id: str = frame_param('chamber', 'frame of plant state and measurements')
@@ -122,7 +128,8 @@ class CameraParams:
                                    for f in fields(SegmentParams)})
         tree = TreeParams(**{f.name: getattr(self, f.name) for f in fields(TreeParams)})
         return PipelineParams(layout, segment, tree, self.max_fit_error_m,
-                              self.max_unexplained, load_lens(self.lens) if self.lens else None)
+                              self.max_unexplained, load_lens(self.lens) if self.lens else None,
+                              self.max_loops, self.max_share_gap)
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
@@ -131,7 +138,7 @@ _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 PIPELINE_FIELDS = ('markers', 'lens',
                    *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
                    *(f.name for f in fields(TreeParams)), 'max_fit_error_m',
-                   'max_unexplained')
+                   'max_unexplained', 'max_loops', 'max_share_gap')
 
 
 def pipeline_values(params: CameraParams) -> dict[str, Any]:
