@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from growspace_camera.segment import Grid
-from growspace_camera.skeleton import owners, skeleton_graph, SkeletonGraph, TreeParams
+from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
 
 DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
@@ -96,39 +96,47 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
     plant = np.array(builder.plant, np.int16)
     lengths = np.bincount(plant[np.array(builder.node_of, np.int64)[builder.kept]],
                           minlength=g.roots.size) if builder.kept else np.zeros(g.roots.size)
+    # The mask's pieces and holes, on its bounding box (the chamber is mostly backdrop).
+    left, top, width, height = cv2.boundingRect(mask.view(np.uint8))
+    box = mask[top:top + height, left:left + width]
+    unexplained, piece = _pieces(box, g.rows[g.roots] - top, g.cols[g.roots] - left)
     return PlantTree(np.array(builder.nodes, np.float64).reshape(-1, 2),
                      np.array(builder.parent, np.int32), plant,
                      np.array(builder.tips, np.int64), int(g.roots.size), g.pruned,
-                     tuple(int(v) for v in lengths), g.unattached, g.unexplained,
+                     tuple(int(v) for v in lengths), g.unattached, unexplained,
                      g.xz[g.leaf_ends].reshape(-1, 2), _stem_radii(g, grid.pixel_m),
-                     _loops(mask), _pieces(mask, g.rows[g.roots], g.cols[g.roots]))
+                     _loops(box), piece)
 
 
-def _pieces(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[int, ...]:
-    """The 8-connected piece of ``mask`` each pixel (``rows``, ``cols``) lies in."""
-    _, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
-    return tuple(int(v) for v in labels[rows, cols])
+def _pieces(box: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[int, tuple[int, ...]]:
+    """(mask pixels in pieces, 8-connected as the skeleton is, that hold none of the stem
+    bases at (``rows``, ``cols``): plant the measured trees do not account for; the piece
+    each base stands in), of a mask cropped to its bounding box."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(box.astype(np.uint8),
+                                                               connectivity=8)
+    piece = labels[rows, cols]
+    rooted = np.zeros(count, bool)
+    rooted[piece] = True
+    rooted[0] = True  # the background
+    return int(stats[~rooted, cv2.CC_STAT_AREA].sum()), tuple(int(v) for v in piece)
 
 
-def _loops(mask: np.ndarray) -> int:
-    """Holes in a mask: pieces of its backdrop (4-connected, as the 8-connected skeleton
-    goes round them) that do not reach the edge of its bounding box."""
-    left, top, width, height = cv2.boundingRect(mask.view(np.uint8))
-    if width < 3 or height < 3:
+def _loops(box: np.ndarray) -> int:
+    """Holes in a mask cropped to its bounding box: pieces of its backdrop (4-connected, as
+    the 8-connected skeleton goes round them) that do not reach the box's edge."""
+    if min(box.shape) < 3:
         return 0
-    backdrop = ~mask[top:top + height, left:left + width]
-    count, labels = cv2.connectedComponents(backdrop.view(np.uint8), connectivity=4)
+    count, labels = cv2.connectedComponents((~box).view(np.uint8), connectivity=4)
     edge = np.unique(np.concatenate((labels[0], labels[-1], labels[:, 0], labels[:, -1])))
     return count - 1 - int(np.count_nonzero(edge))  # label 0 is the plant
 
 
 def _stem_radii(g: SkeletonGraph, pixel_m: float) -> tuple[float, ...]:
     """Each plant's stem radius ``STEM_BAND_M`` above the floor [m] (NaN: no skeleton there)."""
-    owner = owners(g.order, g.pred, g.roots)
     low, high = (h / pixel_m for h in STEM_BAND_M)
     band = (g.arc > low) & (g.arc < high) & ~g.removed
-    return tuple(float(np.median(g.radius[band & (owner == p)])) * pixel_m
-                 if np.any(band & (owner == p)) else float('nan') for p in range(g.roots.size))
+    return tuple(float(np.median(g.radius[band & (g.owner == p)])) * pixel_m
+                 if np.any(band & (g.owner == p)) else float('nan') for p in range(g.roots.size))
 
 
 def _corners(g: SkeletonGraph, shape: tuple[int, int], min_rad: float) -> np.ndarray:

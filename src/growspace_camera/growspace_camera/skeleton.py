@@ -89,7 +89,7 @@ class SkeletonGraph:
         root_x: (P,) each stem's x on the floor [m].
         pruned: Spurs pruned.
         unattached: Skeleton pixels no base reaches.
-        unexplained: Mask pixels in pieces of the mask that hold no kept stem base.
+        owner: (n,) the base (an index into ``roots``) each pixel's path leads to; -1: none.
     """
 
     rows: np.ndarray
@@ -108,7 +108,7 @@ class SkeletonGraph:
     root_x: np.ndarray
     pruned: int
     unattached: int
-    unexplained: int
+    owner: np.ndarray
 
 
 def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
@@ -193,7 +193,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         # Every plant grows up to a tip of its own. A leaf drooping from a stem onto the floor
         # meets it at its blade's end (no tip there), and the stem's base, over the thicker
         # and shorter way, reaches its petiole first: the leaf's contact has no tip.
-        owner = owners(order, pred, roots)
+        owner = _owners(order, pred, roots)
         barren = np.ones(roots.size, bool)
         barren[owner[ends + leaf_ends]] = False  # (a seedling may hold leaves alone)
         if not barren.any() or barren.all():
@@ -207,19 +207,7 @@ def skeleton_graph(mask: np.ndarray, grid: Grid, params: TreeParams,
         radius=radius, turning=_turning(_ancestors(pred, TURN_PX), rows, cols),
         junction=junction, removed=removed, ends=ends, leaf_ends=leaf_ends,
         roots=roots, root_x=(root_cols + 0.5) * grid.pixel_m, pruned=pruned,
-        unattached=int(n - reached.sum()),
-        unexplained=_unexplained(mask[box], rows[roots] - top, cols[roots] - left))
-
-
-def _unexplained(mask: np.ndarray, root_rows: np.ndarray, root_cols: np.ndarray) -> int:
-    """Mask pixels in pieces (8-connected, as the skeleton is) that hold none of the roots:
-    plant the measured trees do not account for."""
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8),
-                                                               connectivity=8)
-    rooted = np.zeros(count, bool)
-    rooted[labels[root_rows, root_cols]] = True
-    rooted[0] = True  # the background
-    return int(stats[~rooted, cv2.CC_STAT_AREA].sum())
+        unattached=int(n - reached.sum()), owner=owner)
 
 
 def _centres(cover: np.ndarray, rows: np.ndarray, cols: np.ndarray,
@@ -318,7 +306,7 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     """Drop bases whose skeleton reaches less than ``min_px`` of arc length (a speck of green
     on the soil line is not a plant: every plant has its first stem); their pixels become
     unattached."""
-    base = owners(order, pred, roots)
+    base = _owners(order, pred, roots)
     height = np.zeros(roots.size)
     np.maximum.at(height, base[order], arc[order])
     keep = height >= min_px
@@ -330,7 +318,7 @@ def _real_stems(roots: np.ndarray, root_cols: np.ndarray, order: np.ndarray, pre
     return roots[keep], root_cols[keep], order, reached
 
 
-def owners(order: np.ndarray, pred: np.ndarray, roots: np.ndarray) -> np.ndarray:
+def _owners(order: np.ndarray, pred: np.ndarray, roots: np.ndarray) -> np.ndarray:
     """Each pixel's base (an index into ``roots``; -1 for a pixel no base reaches)."""
     base = np.full(pred.size, -1, np.int64)
     base[roots] = np.arange(roots.size)
