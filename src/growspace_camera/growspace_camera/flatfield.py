@@ -117,12 +117,17 @@ def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
     return full[:rows, :cols]
 
 
-def _shrunk(image: np.ndarray, f: int, interpolation: int) -> np.ndarray:
-    """``image`` padded (mirrored) to whole multiples of ``f`` and shrunk by ``f``."""
+def _padded(image: np.ndarray, f: int) -> np.ndarray:
+    """``image`` padded (mirrored) at its bottom and right to whole multiples of ``f``."""
     rows, cols = image.shape[:2]
     pad_rows, pad_cols = -rows % f, -cols % f
     if pad_rows or pad_cols:
         image = cv2.copyMakeBorder(image, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
+    return image
+
+
+def _shrunk(image: np.ndarray, f: int, interpolation: int) -> np.ndarray:
+    """A whole multiple of ``f`` in size (``_padded``), shrunk by ``f``."""
     return cv2.resize(image, (image.shape[1] // f, image.shape[0] // f),
                       interpolation=interpolation)
 
@@ -142,7 +147,7 @@ def _coarse_median(image: np.ndarray, k: int) -> np.ndarray:
     pixels is a quarter of the cost; a lamp's edge is smoothed over a shrunk pixel."""
     rows, cols = image.shape[:2]
     f = COARSE_SHRINK
-    small = _median(_shrunk(image, f, cv2.INTER_AREA), max(3, int(round(k / f)) | 1))
+    small = _median(_shrunk(_padded(image, f), f, cv2.INTER_AREA), max(3, int(round(k / f)) | 1))
     full = cv2.resize(small, (small.shape[1] * f, small.shape[0] * f),
                       interpolation=cv2.INTER_LINEAR)
     return full[:rows, :cols].astype(np.float32)
@@ -162,10 +167,8 @@ def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     """
     f = MEDIAN_SHRINK
     rows, cols = image.shape[:2]
+    image = _padded(image, f)
     small = _median(_shrunk(image, f, cv2.INTER_NEAREST), max(3, int(round(k / f)) | 1))
-    if small.shape[0] * f != rows or small.shape[1] * f != cols:  # padded to whole blocks
-        image = cv2.copyMakeBorder(image, 0, small.shape[0] * f - rows,
-                                   0, small.shape[1] * f - cols, cv2.BORDER_REFLECT_101)
     near = np.ones((3, 3), np.uint8)
     full = image.shape[1::-1]
     smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)
