@@ -13,6 +13,7 @@ the local radius.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 
 import cv2
 import numpy as np
@@ -176,25 +177,30 @@ def _line(run: _Run, nodes: list, radius_at,  # noqa: ANN001
     if len(points) < 5:
         return None
     centre = points.mean(axis=0)
-    _, spread, vt = np.linalg.svd(points - centre, full_matrices=False)
-    if spread[1] > STRAIGHT_PX * pixel_m * np.sqrt(len(points)):
+    # The principal axis of the points, from their 2 x 2 scatter (an SVD's, in closed form).
+    (sxx, sxz), (_, szz) = (points - centre).T @ (points - centre)
+    half_gap = float(np.hypot(0.5 * (sxx - szz), sxz))
+    across = max(0.5 * (sxx + szz) - half_gap, 0.0)  # the scatter across the line
+    if across > (STRAIGHT_PX * pixel_m) ** 2 * len(points):
         return None  # the run bends (at a node the walk did not see as a corner): no line
-    direction = vt[0] if np.dot(vt[0], b - a) >= 0 else -vt[0]
-    return centre, direction
+    angle = 0.5 * np.arctan2(2.0 * sxz, sxx - szz)
+    direction = np.array([np.cos(angle), np.sin(angle)])
+    return centre, direction if np.dot(direction, b - a) >= 0 else -direction
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> float:
-    return float(np.arccos(np.clip(np.dot(u, v), -1.0, 1.0)))
+    return math.acos(min(1.0, max(-1.0, float(u[0] * v[0] + u[1] * v[1]))))
 
 
 def _intersect(first: tuple[np.ndarray, np.ndarray],
                second: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+    """Where two lines (point, unit direction) cross; None for (near) parallel ones."""
     (p, u), (q, v) = first, second
-    matrix = np.column_stack((u, -v))
-    if abs(np.linalg.det(matrix)) < 1e-6:
+    cross = float(v[0] * u[1] - u[0] * v[1])  # det [u, -v]
+    if abs(cross) < 1e-6:
         return None
-    t = np.linalg.solve(matrix, q - p)
-    return p + t[0] * u
+    t = float((q[1] - p[1]) * v[0] - (q[0] - p[0]) * v[1]) / cross  # Cramer's rule
+    return p + t * u
 
 
 class _Builder:
@@ -203,6 +209,7 @@ class _Builder:
     def __init__(self, g: SkeletonGraph, mask: np.ndarray, grid: Grid, first_px: float,
                  spacing_px: float) -> None:
         self.g, self.mask, self.grid, self.pixel_m = g, mask, grid, grid.pixel_m
+        self.pred = g.pred.tolist()  # (walked pixel by pixel: a list's items are cheaper)
         self.first, self.spacing = first_px, spacing_px
         plants = g.roots.size
         self.nodes = [(float(x), 0.0) for x in g.root_x]  # each root on the floor
@@ -349,11 +356,11 @@ class _Builder:
               end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Arc positions and (x, z) of the path from node ``last`` to pixel ``p`` (ending at
         ``end``, the key pixel or the tip beyond it)."""
-        g, stop = self.g, self.node_pixel[last]
+        g, stop, pred = self.g, self.node_pixel[last], self.pred
         pixels = []
         while p != stop and p >= 0:
             pixels.append(p)
-            p = int(g.pred[p])
+            p = pred[p]
         pixels.reverse()
         s = [0.0] + [self.since[k] for k in pixels] + [reach]
         xz = np.vstack((self.nodes[last], g.xz[pixels].reshape(-1, 2), end))
@@ -372,9 +379,9 @@ class _Builder:
         end short of the tip, and often hooked to one side), less the end's radius."""
         g, p = self.g, end
         for _ in range(DIRECTION_PX):
-            if g.pred[p] < 0:
+            if self.pred[p] < 0:
                 break
-            p = int(g.pred[p])
+            p = self.pred[p]
         d = g.xz[end] - g.xz[p]
         norm = float(np.hypot(*d))
         if norm == 0:
