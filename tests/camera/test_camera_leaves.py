@@ -67,6 +67,19 @@ def test_a_leaf_at_a_shoots_end_leaves_the_tip_at_the_shoots_end():
     assert np.hypot(*(whole.nodes[whole.tips[0]] - (0.1, 0.13))) > 0.03  # out on the leaf
 
 
+def test_a_leaf_no_wider_than_its_shoots_base_is_cut_off_the_shoots_end():
+    # A side shoot 8 mm wide ends at (0.14, 0.11); a petiole then a blade only as wide as the
+    # shoot carry its skeleton on. The blade is the outer half's widest stretch, not the whole
+    # branch's: the shoot's base is as wide, and judged by that the leaf went uncut.
+    mask = mask_of(STEM) | mask_of([(0.1, 0.08), (0.14, 0.11)], width_m=0.008)
+    mask |= mask_of([(0.14, 0.11), (0.155, 0.12)], width_m=0.002)
+    mask = blade(mask, (0.155, 0.12), (0.195, 0.145), width_m=0.008)
+    tree = tree_of(mask)
+    assert tree.tips.size == 2 and len(tree.leaf_tips) == 1
+    assert near(tree.nodes[tree.tips], (0.14, 0.11), 0.008), tree.nodes[tree.tips]
+    assert near(tree.leaf_tips, (0.195, 0.145), 0.012)
+
+
 def test_a_blade_whose_base_lies_on_the_stem_is_a_leaf_by_its_wide_end():
     # No petiole and no narrow base: the blade (2.4 cm wide) starts at the stem's edge, so
     # nothing narrower comes before its widest part; its end is wider than a shoot's.

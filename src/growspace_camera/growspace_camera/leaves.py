@@ -7,9 +7,9 @@ a false tip, and a leaf at a shoot's end carries that shoot's tip out to the lea
 A shoot keeps its width or narrows towards its tip (the simulator thickens a segment with its
 descendants and draws a tip narrower still; real stems do the same). A blade is wider than the
 stalk that holds it (a petiole, or its own narrow base). So an end branch, walked from the stem
-it leaves (past that stem's own radius) out to its end, ends in a leaf when its widest part
-lies beyond ``BLADE_FROM`` of its length and is ``leaf_widening`` times, and at least
-``LEAF_RISE_PX`` more than, the narrowest radius before it.
+it leaves (past that stem's own radius) out to its end, ends in a leaf when the widest part of
+its stretch beyond ``BLADE_FROM`` of its length (the one nearest the end) is ``leaf_widening``
+times, and at least ``LEAF_RISE_PX`` more than, the narrowest radius before it.
 
 A blade whose base lies on the stem, or on a petiole as wide, has no narrower stalk before
 it; but a shoot's end is thin (the simulator's tips are its thinnest segments, 1.3 cm wide
@@ -94,7 +94,10 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
     # A blade is wide along a stretch: a pixel or two of bulge where a crossing branch or a
     # corner touches the path is not one (a median over ``SMOOTH_PX`` along the path).
     r = _running_median(r[own], SMOOTH_PX)
-    widest = int(np.argmax(r))
+    # The blade: the widest stretch of the branch's outer part, the one nearest its end (a
+    # shoot tapers, so its base can be as wide as, or wider than, the leaf at its end).
+    outer = min(int(np.searchsorted(s, BLADE_FROM * s[-1])), r.size - 1)
+    widest = r.size - 1 - int(np.argmax(r[:outer - 1:-1] if outer else r[::-1]))
     narrow = widest - int(np.argmin(r[widest::-1]))  # the last narrowest: nearest the blade
     if not (widening > 0 and s[widest] >= BLADE_FROM * s[-1]
             and r[widest] >= widening * r[narrow] and r[widest] - r[narrow] >= LEAF_RISE_PX):
