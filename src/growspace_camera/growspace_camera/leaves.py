@@ -31,6 +31,7 @@ widest shoot end of the plants grown.
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 LEAF_RISE_PX = 1.0  # a blade is at least this much wider than its petiole (the distance
 # transform's radii step by about 0.96 px across a stem)
@@ -93,7 +94,7 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
     s = s[own]
     # A blade is wide along a stretch: a pixel or two of bulge where a crossing branch or a
     # corner touches the path is not one (a median over ``SMOOTH_PX`` along the path).
-    r = _running_median(r[own], SMOOTH_PX)
+    r = median_filter(r[own], size=SMOOTH_PX, mode='nearest')
     # The blade: the widest stretch of the branch's outer part, the one nearest its end (a
     # shoot tapers, so its base can be as wide as, or wider than, the leaf at its end).
     outer = min(int(np.searchsorted(s, BLADE_FROM * s[-1])), r.size - 1)
@@ -115,11 +116,3 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
         start -= 1
     return int(own[start])
 
-
-def _running_median(values: np.ndarray, size: int) -> np.ndarray:
-    """The median over ``size`` (odd) neighbours of each value, the ends repeated beyond the
-    array (scipy's ``median_filter`` with ``mode='nearest'``, without its per-call cost on
-    arrays this short)."""
-    half = size // 2
-    padded = np.pad(values, half, mode='edge')
-    return np.median(np.lib.stride_tricks.sliding_window_view(padded, size), axis=1)
