@@ -63,7 +63,7 @@ def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m:
             plant parts wider than half of it that ``exclude`` misses, are not followed.
         fill: (rows, cols, 3) float32, the light to assume where ``exclude`` is set.
         keep_edges: Keep a lamp's hard edge where it is (``_edge_keeping_median``); False:
-            a coarse estimate (``_coarse_median``, about a quarter of the cost), for a
+            a coarse estimate (``_coarse_light``, on blocks, with ``fill`` unused), for a
             light that is only assumed behind the plant.
 
     Returns:
@@ -73,16 +73,19 @@ def backdrop_light(bgr: np.ndarray, exclude: np.ndarray, pixel_m: float, edge_m:
     if not backdrop.any():
         return None
     average = cv2.mean(bgr, backdrop)[:3]
-    if not exclude.any():
-        fill = bgr
-    elif fill is None:
-        fill = _backdrop_mean(bgr, backdrop, max(3, int(round(BACKDROP_KERNEL_M / pixel_m))),
-                              average)
-    filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
-    cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
-    np.maximum(filled, 1, out=filled)
     k = max(3, int(round(edge_m / pixel_m)) | 1)
-    light = _edge_keeping_median(filled, k) if keep_edges else _coarse_median(filled, k)
+    mean_px = max(3, int(round(BACKDROP_KERNEL_M / pixel_m)))
+    if keep_edges:
+        if not exclude.any():
+            fill = bgr
+        elif fill is None:
+            fill = _backdrop_mean(bgr, backdrop, mean_px, average)
+        filled = cv2.convertScaleAbs(bgr)  # uint8, saturated
+        cv2.copyTo(cv2.convertScaleAbs(fill), exclude.view(np.uint8), filled)
+        np.maximum(filled, 1, out=filled)
+        light = _edge_keeping_median(filled, k)
+    else:
+        light = _coarse_light(bgr, backdrop, k, mean_px, average)
     # A backdrop is never lit this little (vignetting and a lamp's cast take a fraction of the
     # light, not nearly all of it): a light this dark follows a wide dark object (a cabinet
     # post, a pot, soil), and dividing by it would make that object's noise read as colour.
@@ -148,16 +151,31 @@ def _shrink_for(k: int) -> int:
     return max(1, int(round(k / MEDIAN_PX)))
 
 
-def _coarse_median(image: np.ndarray, k: int) -> np.ndarray:
-    """A median of about ``k`` x ``k`` pixels of a uint8 BGR image, computed on its block
-    means shrunk to a ``MEDIAN_PX`` window (``_shrink_for``) and enlarged (float32); a
-    lamp's edge is smoothed over a shrunk pixel."""
-    rows, cols = image.shape[:2]
+def _coarse_light(bgr: np.ndarray, backdrop: np.ndarray, k: int, mean_px: int,
+                  average: tuple[float, ...]) -> np.ndarray:
+    """A median of about ``k`` x ``k`` pixels of the backdrop, computed on blocks shrunk to
+    a ``MEDIAN_PX`` window (``_shrink_for``) and enlarged (float32 BGR): each block is the
+    mean of its ``backdrop`` (uint8 0/1) pixels, or, where less than half of it is backdrop,
+    of the backdrop within about ``mean_px`` of it (the backdrop's ``average`` where there is
+    none). Only a guess at the light behind the plant: a lamp's edge is smoothed over a block.
+    """
+    rows, cols = backdrop.shape
     f = _shrink_for(k)
-    small = _median(_shrunk(_padded(image, f), f, cv2.INTER_AREA), MEDIAN_PX)
+    lit = np.zeros_like(bgr)
+    cv2.copyTo(bgr, backdrop, lit)
+    lit = _shrunk(_padded(lit, f), f, cv2.INTER_AREA)
+    weight = _shrunk(_padded(backdrop.astype(np.float32), f), f, cv2.INTER_AREA)
+    near = (max(1, int(round(mean_px / f))) | 1,) * 2
+    wide_lit, wide_weight = cv2.blur(lit, near), cv2.blur(weight, near)
+    own = weight >= 0.5
+    lit[~own], weight[~own] = wide_lit[~own], wide_weight[~own]
+    small = cv2.divide(lit, cv2.merge((np.maximum(weight, 1e-6),) * 3))
+    small[weight < 0.05] = average
+    np.maximum(small, 1.0, out=small)
+    small = _median(small, MEDIAN_PX)  # (OpenCV's float median takes 3 or 5 pixels)
     full = cv2.resize(small, (small.shape[1] * f, small.shape[0] * f),
                       interpolation=cv2.INTER_LINEAR)
-    return full[:rows, :cols].astype(np.float32)
+    return full[:rows, :cols]
 
 
 def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
