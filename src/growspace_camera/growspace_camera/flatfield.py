@@ -197,8 +197,7 @@ def _edge_keeping_median(image: np.ndarray, k: int) -> np.ndarray:
     small = _median(_shrunk(image, f, cv2.INTER_NEAREST), MEDIAN_PX)
     near = np.ones((3, 3), np.uint8)
     full = image.shape[1::-1]
-    smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)
-    np.maximum(smooth, 1, out=smooth)
+    smooth = cv2.resize(small, full, interpolation=cv2.INTER_LINEAR)  # >= 1, as image is
     low = cv2.resize(cv2.erode(small, near), full, interpolation=cv2.INTER_LINEAR)
     high = cv2.resize(cv2.dilate(small, near), full, interpolation=cv2.INTER_LINEAR)
     # uint8 throughout (OpenCV saturates): the light to half a grey level.

@@ -210,8 +210,8 @@ def tissue(bgr: np.ndarray, level: float, green: np.ndarray | None = None) -> np
 
 def _unit(x: np.ndarray, top: float = 1.0) -> np.ndarray:
     """``x`` clipped to [0, top] in place (a single-channel float32 image)."""
-    np.maximum(x, 0.0, out=x)
-    return np.minimum(x, top, out=x)
+    cv2.threshold(x, top, top, cv2.THRESH_TRUNC, dst=x)  # (a quarter of numpy's time)
+    return cv2.threshold(x, 0.0, 0.0, cv2.THRESH_TOZERO, dst=x)[1]
 
 
 def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
