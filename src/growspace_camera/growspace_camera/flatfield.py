@@ -107,20 +107,24 @@ def _backdrop_mean(bgr: np.ndarray, backdrop: np.ndarray, k: int,
     backdrop's ``average`` light stands in."""
     f = MEDIAN_SHRINK
     rows, cols = backdrop.shape
-    pad_rows, pad_cols = -rows % f, -cols % f
-    weight = backdrop.astype(np.float32)
-    lit = cv2.multiply(bgr, cv2.merge((weight,) * 3))
-    if pad_rows or pad_cols:
-        weight = cv2.copyMakeBorder(weight, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-        lit = cv2.copyMakeBorder(lit, 0, pad_rows, 0, pad_cols, cv2.BORDER_REFLECT_101)
-    size = (weight.shape[1] // f, weight.shape[0] // f)
+    lit, weight = _backdrop_blocks(bgr, backdrop, f)
     kc = (max(1, int(round(k / f))) | 1,) * 2
-    weight = cv2.blur(cv2.resize(weight, size, interpolation=cv2.INTER_AREA), kc)
-    lit = cv2.blur(cv2.resize(lit, size, interpolation=cv2.INTER_AREA), kc)
+    weight, lit = cv2.blur(weight, kc), cv2.blur(lit, kc)
     mean = cv2.divide(lit, cv2.merge((np.maximum(weight, 1e-6),) * 3))
     mean[weight < 0.05] = average
-    full = cv2.resize(mean, (size[0] * f, size[1] * f), interpolation=cv2.INTER_LINEAR)
+    full = cv2.resize(mean, (mean.shape[1] * f, mean.shape[0] * f),
+                      interpolation=cv2.INTER_LINEAR)
     return full[:rows, :cols]
+
+
+def _backdrop_blocks(bgr: np.ndarray, backdrop: np.ndarray,
+                     f: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of ``f`` x ``f`` pixels (the chamber ``_padded``): the mean of ``bgr`` over
+    its ``backdrop`` (uint8 0/1) pixels times their share of it, and that share (float32)."""
+    lit = np.zeros_like(bgr)
+    cv2.copyTo(bgr, backdrop, lit)
+    return (_shrunk(_padded(lit, f), f, cv2.INTER_AREA),
+            _shrunk(_padded(backdrop.astype(np.float32), f), f, cv2.INTER_AREA))
 
 
 def _padded(image: np.ndarray, f: int) -> np.ndarray:
@@ -161,10 +165,7 @@ def _coarse_light(bgr: np.ndarray, backdrop: np.ndarray, k: int, mean_px: int,
     """
     rows, cols = backdrop.shape
     f = _shrink_for(k)
-    lit = np.zeros_like(bgr)
-    cv2.copyTo(bgr, backdrop, lit)
-    lit = _shrunk(_padded(lit, f), f, cv2.INTER_AREA)
-    weight = _shrunk(_padded(backdrop.astype(np.float32), f), f, cv2.INTER_AREA)
+    lit, weight = _backdrop_blocks(bgr, backdrop, f)
     near = (max(1, int(round(mean_px / f))) | 1,) * 2
     wide_lit, wide_weight = cv2.blur(lit, near), cv2.blur(weight, near)
     own = weight >= 0.5

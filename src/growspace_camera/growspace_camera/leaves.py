@@ -115,4 +115,3 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
             and s[narrow] - s[start - 1] <= petiole_px:
         start -= 1
     return int(own[start])
-
