@@ -97,11 +97,12 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
     r = median_filter(r[own], size=SMOOTH_PX, mode='nearest')
     # The blade: the widest stretch of the branch's outer part, the one nearest its end (a
     # shoot tapers, so its base can be as wide as, or wider than, the leaf at its end).
-    outer = min(int(np.searchsorted(s, BLADE_FROM * s[-1])), r.size - 1)
-    widest = r.size - 1 - int(np.argmax(r[:outer - 1:-1] if outer else r[::-1]))
+    # (arc lengths summed over chords wobble by a pixel: not sorted, so no searchsorted)
+    outer = np.flatnonzero(s >= BLADE_FROM * s[-1])  # never empty: it holds the end
+    widest = int(outer[outer.size - 1 - int(np.argmax(r[outer][::-1]))])
     narrow = widest - int(np.argmin(r[widest::-1]))  # the last narrowest: nearest the blade
-    if not (widening > 0 and s[widest] >= BLADE_FROM * s[-1]
-            and r[widest] >= widening * r[narrow] and r[widest] - r[narrow] >= LEAF_RISE_PX):
+    if not (widening > 0 and r[widest] >= widening * r[narrow]
+            and r[widest] - r[narrow] >= LEAF_RISE_PX):
         if not blunt:
             return None
         # No narrower stalk before the widest part, but an end as wide as a blade: its base
