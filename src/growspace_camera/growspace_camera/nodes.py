@@ -301,7 +301,7 @@ class _Builder:
     def walk(self, key: np.ndarray) -> None:
         """Place the nodes at the ``key`` pixels, path by path."""
         g = self.g
-        pred, arc, removed = g.pred.tolist(), g.arc.tolist(), g.removed.tolist()
+        pred, arc, removed = self.pred, g.arc.tolist(), g.removed.tolist()
         end = np.zeros(len(pred), bool)
         end[g.ends] = True
         key, end = key.tolist(), end.tolist()
