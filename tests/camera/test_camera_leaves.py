@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
+from growspace_camera.leaves import cut_leaves
 from growspace_camera.markers import MarkerLayout
 from growspace_camera.measure import Target
 from growspace_camera.messages import measurement_msg
@@ -91,6 +92,26 @@ def test_a_blade_whose_base_lies_on_the_stem_is_a_leaf_by_its_wide_end():
     assert not np.any(tree.nodes[:, 0] > 0.115)  # no node out on the leaf
     # The widening rule alone does not see it: its end is a tip.
     assert tree_of(mask, leaf_end_m=0.0).tips.size == 2
+
+
+def test_a_pointed_blade_on_a_shoots_end_is_cut_whole_not_at_its_point():
+    # An end branch that is a blade alone (radii along it, in pixels, from a twin photo: it
+    # leaves the junction at a shoot's end 4.6 px wide, widens to 6.4, then narrows to its
+    # point). It never narrows below its start before the blade, so only its wide end marks
+    # it; the shoot ends where it was last thin *before* the blade, here nowhere: the whole
+    # branch is leaf. Taking the thin point beyond the blade left a false tip there.
+    radius = np.array([4.6, 4.2, 3.8, 3.8, 4.6, 4.8, 5.1, 4.6, 5.2, 5.7, 6.4, 6.4, 6.4, 6.4,
+                       5.7, 5.2, 4.6, 4.6, 3.8, 2.9, 1.9, 1.4])
+    n = radius.size
+    pred = np.arange(-1, n - 1)
+    branching = np.zeros(n, bool)
+    branching[0] = True
+    removed = np.zeros(n, bool)
+    pred[0] = 99  # (the junction's own path goes on towards a base, off this array)
+    shoots, leaves = cut_leaves(pred, np.arange(n, dtype=float), radius, branching, [n - 1],
+                                removed, 1.5, 10.0, 3.8)
+    assert shoots == [] and leaves == [n - 1]
+    assert removed[1:].all() and not removed[0]
 
 
 @pytest.mark.parametrize('width_m', [0.006, 0.012, 0.02])

@@ -107,7 +107,8 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
             return None
         # No narrower stalk before the widest part, but an end as wide as a blade: its base
         # lies on the stem (or on a petiole as wide); the shoot ends where it is last thin.
-        thin = np.flatnonzero(r <= SHOOT_OF_BLADE * blade_px)
+        # (only before the widest part: a pointed blade is thin at its own end too)
+        thin = np.flatnonzero(r[:widest] <= SHOOT_OF_BLADE * blade_px)
         if thin.size == 0:
             return 0
         narrow = int(thin[-1])
