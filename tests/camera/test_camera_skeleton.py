@@ -71,6 +71,18 @@ def test_a_corner_gets_its_node_where_the_stem_turns():
     assert tree.nodes[tree.tips[0]] == pytest.approx((0.16, 0.13), abs=0.003)
 
 
+@pytest.mark.parametrize('bend_deg', [10.0, 12.0])
+def test_a_corner_after_a_gentle_bend_is_placed_by_the_segment_next_to_it(bend_deg):
+    # The stem bends by less than corner_deg at its first node (a node placed between, no
+    # corner), then turns 80 degrees. Its line is fitted to the segment next to the corner:
+    # fitted to the whole run it is their mean, and the corner moves 3-4 mm along the turn.
+    bend = np.radians(bend_deg)
+    corner = (0.1 + 0.05 * np.sin(bend), 0.05 + 0.05 * np.cos(bend))
+    tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.05), corner, (corner[0] + 0.05, corner[1])]))
+    assert tree.tips.size == 1 and len(tree.nodes) == 4
+    assert near(tree.nodes, corner, 0.0015)
+
+
 def test_a_fork_has_two_tips_and_one_shared_node():
     tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.05, 0.15)], [(0.1, 0.1), (0.15, 0.15)]))
     assert tree.plants == 1 and tree.tips.size == 2

@@ -24,6 +24,7 @@ from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
 DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
 CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
+LINE_REACH = 0.9  # of the spacing: a corner's lines are fitted within this of it (one segment)
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
 STEM_BAND_M = (0.03, 0.08)  # a plant's stem radius is read this high up its first stem [m]
 
@@ -162,17 +163,20 @@ class _Run:
     was: tuple[np.ndarray, np.ndarray] = ()  # its ends before the corners were refined
 
 
-def _line(run: _Run, nodes: list, radius_at,  # noqa: ANN001
-          pixel_m: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """(point, unit direction) fitted to a run's pixels away from both of its ends, where the
-    stems they meet bend its skeleton; None when too little of it is left or it is not
-    straight (its pixels further than ``STRAIGHT_PX`` from the line, RMS)."""
+def _line(run: _Run, nodes: list, radius_at, pixel_m: float,  # noqa: ANN001
+          at_end: bool, reach_m: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(point, unit direction) fitted to a run's pixels within ``reach_m`` of its end (or of
+    its start) and away from both of its ends, where the stems they meet bend its skeleton;
+    None when too little of it is left or it is not straight (its pixels further than
+    ``STRAIGHT_PX`` from the line, RMS). A run through nodes the walk placed between (a
+    gentle bend) is straight one segment at a time: fitted whole, its line is their mean."""
     a, b = np.array(nodes[run.start]), np.array(nodes[run.end])
     trim_a, trim_b = radius_at(run.start) + 0.004, run.end_radius + 0.004
     points = run.pixels
     if len(points) < 5:
         return None
-    keep = (np.hypot(*(points - a).T) > trim_a) & (np.hypot(*(points - b).T) > trim_b)
+    from_a, from_b = np.hypot(*(points - a).T), np.hypot(*(points - b).T)
+    keep = (from_a > trim_a) & (from_b > trim_b) & ((from_b if at_end else from_a) < reach_m)
     points = points[keep]
     if len(points) < 5:
         return None
@@ -232,18 +236,22 @@ class _Builder:
         out: dict[int, list[_Run]] = {}
         for run in self.runs:
             out.setdefault(run.start, []).append(run)
-        lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m)
-                 for run in self.runs}
+        reach = LINE_REACH * self.spacing * self.pixel_m
+        lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, True, reach)
+                 for run in self.runs}  # (arriving at a corner)
+        leaving_lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, False,
+                                        reach)
+                         for run in self.runs}  # (leaving it)
         for run in self.runs:
             run.was = (np.array(self.nodes[run.start]), np.array(self.nodes[run.end]))
-        placed = self._first_nodes(lines, limit_m)
+        placed = self._first_nodes(limit_m)
         for node, arriving in into.items():
             if node in self.tips or node in placed or arriving.start < 0 \
                     or lines[id(arriving)] is None:
                 continue
             best = None
             for leaving in out.get(node, ()):
-                line = lines[id(leaving)]
+                line = leaving_lines[id(leaving)]
                 if line is None:
                     continue
                 angle = _angle(lines[id(arriving)][1], line[1])
@@ -265,7 +273,7 @@ class _Builder:
                 self.nodes[k] = tuple(np.array(self.nodes[k]) + (1 - t) * moved_a
                                       + t * moved_b)
 
-    def _first_nodes(self, lines: dict, limit_m: float) -> set[int]:
+    def _first_nodes(self, limit_m: float) -> set[int]:
         """Put the first node of each stem one first segment up its fitted line.
 
         Where the first stem ends in a junction or a corner, the skeleton's fork sits off the
@@ -275,9 +283,10 @@ class _Builder:
         """
         placed = set()
         for run in self.runs:
-            line = lines[id(run)]
-            if self.parent[run.start] >= 0 or run.inner or run.end in self.tips \
-                    or line is None:
+            if self.parent[run.start] >= 0 or run.inner or run.end in self.tips:
+                continue
+            line = _line(run, self.nodes, self.radius_at, self.pixel_m, False, math.inf)
+            if line is None:
                 continue
             root = np.array(self.nodes[run.start])
             node = root + self.first * self.pixel_m * line[1]
