@@ -24,6 +24,7 @@ from growspace_camera.skeleton import skeleton_graph, SkeletonGraph, TreeParams
 DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
 CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
+TIP_BACK_PX = 4  # a tip's place across its shoot is the plant's cover from this far back
 LINE_REACH = 0.9  # of the spacing: a corner's lines are fitted within this of it (one segment)
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
 STEM_BAND_M = (0.03, 0.08)  # a plant's stem radius is read this high up its first stem [m]
@@ -85,7 +86,8 @@ def measure_tree(mask: np.ndarray, grid: Grid, first_m: float, spacing_m: float,
         CameraError: ``NO_PLANT`` when the mask is empty or no skeleton reaches the floor.
     """
     g = skeleton_graph(mask, grid, params, coverage)
-    builder = _Builder(g, mask, grid, first_m / grid.pixel_m, spacing_m / grid.pixel_m)
+    builder = _Builder(g, mask, grid, first_m / grid.pixel_m, spacing_m / grid.pixel_m,
+                       coverage)
     # Where a loop (branches crossing in the plane) was cut into a tree, the path ends
     # without an end point: it gets a node too, so the loop is drawn whole.
     leaf = np.zeros(g.pred.size, bool)
@@ -211,8 +213,9 @@ class _Builder:
     """Walks the paths in order, placing nodes (see the module docstring)."""
 
     def __init__(self, g: SkeletonGraph, mask: np.ndarray, grid: Grid, first_px: float,
-                 spacing_px: float) -> None:
+                 spacing_px: float, coverage: np.ndarray | None = None) -> None:
         self.g, self.mask, self.grid, self.pixel_m = g, mask, grid, grid.pixel_m
+        self.cover = coverage
         self.pred = g.pred.tolist()  # (walked pixel by pixel: a list's items are cheaper)
         self.first, self.spacing = first_px, spacing_px
         plants = g.roots.size
@@ -415,4 +418,16 @@ class _Builder:
         # mask's edge. The apex pixels' centres lie half a pixel inside that edge, and the
         # distance transform counts to the background pixel's centre half a pixel beyond it.
         back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
-        return g.xz[end] + apex.mean(axis=0) - back * d
+        tip = g.xz[end] + apex.mean(axis=0) - back * d
+        if self.cover is None:
+            return tip
+        # Across the shoot, the apex is whole pixels: the centroid of the plant's cover over
+        # its end (from TIP_BACK_PX behind the skeleton's end) places it to a fraction of one.
+        near_end = mine & (along >= -TIP_BACK_PX * self.pixel_m)
+        cover = self.cover[top:r + reach + 1, left:c + reach + 1][rows, cols] * near_end
+        total = float(cover.sum())
+        if total <= 0.0:
+            return tip
+        side = np.array([-d[1], d[0]])
+        shift = float(cover @ (offset @ side)) / total - float((tip - g.xz[end]) @ side)
+        return tip + shift * side
