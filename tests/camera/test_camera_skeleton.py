@@ -121,6 +121,40 @@ def test_a_tip_is_placed_across_its_shoot_by_the_plant_cover():
     assert np.max(off[True]) < 0.0015
 
 
+def test_a_tapered_tip_is_placed_along_its_shoot_by_the_plant_cover():
+    # As the twin draws a simulator tip: a shoot narrowing from 12 mm to 4.2 mm, a round end
+    # 2.1 mm in radius at the node, blurred by 0.7 px. Along the shoot the tip lies within
+    # 1.5 mm of the node (mean 0.8) at any angle and sub-pixel offset.
+    scale, k = 8, 8 / GRID.pixel_m
+
+    def fine(point: tuple[float, float]) -> np.ndarray:
+        return np.array([point[0] * k, (0.2 - point[1]) * k])
+
+    errors = []
+    for dx in np.linspace(0.0, 0.002, 5):
+        for angle in np.radians([0.0, 15.0, 30.0, 45.0]):
+            base, fork = (0.1 + dx, 0.0), (0.1 + dx, 0.1)
+            tip = (fork[0] + 0.06 * np.sin(angle), 0.1 + 0.06 * np.cos(angle))
+            canvas = np.zeros((GRID.shape[0] * scale, GRID.shape[1] * scale), np.uint8)
+            for a, b, half_a, half_b in ((base, fork, 0.006, 0.006), (fork, tip, 0.006, 0.0021)):
+                a, b = fine(a), fine(b)
+                normal = np.array([-(b - a)[1], (b - a)[0]]) / np.hypot(*(b - a))
+                quad = [a + half_a * k * normal, b + half_b * k * normal,
+                        b - half_b * k * normal, a - half_a * k * normal]
+                cv2.fillConvexPoly(canvas, np.round(np.array(quad) * 16).astype(np.int32), 255,
+                                   cv2.LINE_AA, 4)
+                cv2.circle(canvas, tuple(int(v) for v in np.round(b * 16)),
+                           int(half_b * k * 16), 255, -1, cv2.LINE_AA, 4)
+            cover = cv2.resize(canvas.astype(np.float32) / 255, GRID.shape[::-1],
+                               interpolation=cv2.INTER_AREA)
+            cover = cv2.GaussianBlur(cover, (0, 0), 0.7)
+            tree = measure_tree(cover > 0.5, GRID, SPACING, SPACING, TreeParams(), cover)
+            error = tree.nodes[tree.tips] - tip
+            error = error[np.argmin(np.hypot(*error.T))]
+            errors.append(float(error @ np.subtract(tip, fork)) / 0.06)
+    assert np.max(np.abs(errors)) < 0.0015 and np.mean(np.abs(errors)) < 0.0008, errors
+
+
 def test_a_fork_has_two_tips_and_one_shared_node():
     tree = tree_of(mask_of([(0.1, 0.0), (0.1, 0.1), (0.05, 0.15)], [(0.1, 0.1), (0.15, 0.15)]))
     assert tree.plants == 1 and tree.tips.size == 2

@@ -25,6 +25,11 @@ DIRECTION_PX = 10  # a tip's direction is taken over this many skeleton pixels
 STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [px]
 CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
 TIP_BACK_PX = 4  # a tip's place across its shoot is the plant's cover from this far back
+TIP_WIDTH_PX = 2  # a tip's radius is read from the cover across its shoot this far back
+# A round end's radius is this much less than half the cover across the shoot just behind
+# the skeleton's end: the shoot narrows to its end, and blur spreads a thin end's cover
+# (twin development photos: it leaves the tips unbiased along the shoot; quartiles +-0.8 mm)
+TIP_NARROWING_PX = 0.7
 LINE_REACH = 0.9  # of the spacing: a corner's lines are fitted within this of it (one segment)
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
 STEM_BAND_M = (0.03, 0.08)  # a plant's stem radius is read this high up its first stem [m]
@@ -386,7 +391,7 @@ class _Builder:
         return len(self.nodes) - 1
 
     def _tip(self, end: int) -> np.ndarray:
-        """The tip beyond a skeleton end point (x, z) [m]: the mask's pixels farthest along the
+        """The tip beyond a skeleton end point (x, z) [m]: the mask's edge farthest along the
         branch's direction, within a few radii of the end (thinning leaves the skeleton's
         end short of the tip, and often hooked to one side), less the end's radius."""
         g, p = self.g, end
@@ -413,21 +418,26 @@ class _Builder:
         if not np.any(mine & (along > 0)):
             return g.xz[end]
         along = np.where(mine, along, -np.inf)
-        apex = offset[along >= along.max() - 0.5 * self.pixel_m]
-        # A tip is round: its node is the centre of its end, the end's radius inside the
-        # mask's edge. The apex pixels' centres lie half a pixel inside that edge, and the
-        # distance transform counts to the background pixel's centre half a pixel beyond it.
-        back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
-        tip = g.xz[end] + apex.mean(axis=0) - back * d
+        at_apex = along >= along.max() - 0.5 * self.pixel_m
+        apex = offset[at_apex].mean(axis=0)
         if self.cover is None:
-            return tip
-        # Across the shoot, the apex is whole pixels: the centroid of the plant's cover over
-        # its end (from TIP_BACK_PX behind the skeleton's end) places it to a fraction of one.
-        near_end = mine & (along >= -TIP_BACK_PX * self.pixel_m)
-        cover = self.cover[top:r + reach + 1, left:c + reach + 1][rows, cols] * near_end
-        total = float(cover.sum())
-        if total <= 0.0:
-            return tip
+            # A tip is round: its node is the centre of its end, the end's radius inside the
+            # mask's edge. The apex pixels' centres lie half a pixel inside that edge, and the
+            # distance transform counts to the background pixel's centre half a pixel beyond.
+            back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
+            return g.xz[end] + apex - back * d
+        # With the plant's cover, to a fraction of a pixel: the edge lies as far into the
+        # apex pixels as the plant covers them; the end's radius is half the cover across
+        # the shoot just behind the skeleton's end, less TIP_NARROWING_PX. Across the shoot,
+        # the tip is the cover's centroid over its end (from TIP_BACK_PX behind), not the
+        # apex's whole pixels.
+        cover = self.cover[top:r + reach + 1, left:c + reach + 1][rows, cols] * mine
+        px = self.pixel_m
+        behind = cover[(along < 0) & (along >= -TIP_WIDTH_PX * px)].sum() / (2 * TIP_WIDTH_PX)
+        edge = float(apex @ d) + (float(cover[at_apex].mean()) - 0.5) * px
+        tip_along = edge - max(0.0, float(behind) - TIP_NARROWING_PX) * px
+        near_end = cover * (along >= -TIP_BACK_PX * px)
         side = np.array([-d[1], d[0]])
-        shift = float(cover @ (offset @ side)) / total - float((tip - g.xz[end]) @ side)
-        return tip + shift * side
+        total = float(near_end.sum())
+        tip_side = float(near_end @ (offset @ side)) / total if total > 0 else float(apex @ side)
+        return g.xz[end] + tip_along * d + tip_side * side
