@@ -244,17 +244,20 @@ class _Builder:
         out: dict[int, list[_Run]] = {}
         for run in self.runs:
             out.setdefault(run.start, []).append(run)
+        # The lines of the runs into and out of each node that may be a corner (not a tip),
+        # fitted before any node moves.
+        corners = set(into) - set(self.tips)
         reach = LINE_REACH * self.spacing * self.pixel_m
         lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, True, reach)
-                 for run in self.runs}  # (arriving at a corner)
+                 for run in self.runs if run.end in corners}
         leaving_lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, False,
                                         reach)
-                         for run in self.runs}  # (leaving it)
+                         for run in self.runs if run.start in corners}
         for run in self.runs:
             run.was = (np.array(self.nodes[run.start]), np.array(self.nodes[run.end]))
         placed = self._first_nodes(limit_m)
         for node, arriving in into.items():
-            if node in self.tips or node in placed or arriving.start < 0 \
+            if node not in corners or node in placed or arriving.start < 0 \
                     or lines[id(arriving)] is None:
                 continue
             best = None
