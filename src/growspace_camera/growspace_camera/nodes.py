@@ -170,21 +170,34 @@ class _Run:
     was: tuple[np.ndarray, np.ndarray] = ()  # its ends before the corners were refined
 
 
-def _line(run: _Run, nodes: list, radius_at, pixel_m: float,  # noqa: ANN001
-          at_end: bool, reach_m: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """(point, unit direction) fitted to a run's pixels within ``reach_m`` of its end (or of
-    its start) and away from both of its ends, where the stems they meet bend its skeleton;
-    None when too little of it is left or it is not straight (its pixels further than
-    ``STRAIGHT_PX`` from the line, RMS). A run through nodes the walk placed between (a
-    gentle bend) is straight one segment at a time: fitted whole, its line is their mean."""
+Line = tuple[np.ndarray, np.ndarray]  # (a point, a unit direction)
+
+
+def _lines(run: _Run, nodes: list, radius_at, pixel_m: float,  # noqa: ANN001
+           reach_m: float) -> tuple[Line | None, Line | None]:
+    """The lines of a run (``_fit``) next to its end and next to its start: fitted to its
+    pixels within ``reach_m`` of that end and away from both ends, where the stems they meet
+    bend its skeleton. A run through nodes the walk placed between (a gentle bend) is
+    straight one segment at a time: fitted whole, its line is their mean."""
     a, b = np.array(nodes[run.start]), np.array(nodes[run.end])
-    trim_a, trim_b = radius_at(run.start) + 0.004, run.end_radius + 0.004
     points = run.pixels
     if len(points) < 5:
-        return None
+        return None, None
     from_a, from_b = np.hypot(*(points - a).T), np.hypot(*(points - b).T)
-    keep = (from_a > trim_a) & (from_b > trim_b) & ((from_b if at_end else from_a) < reach_m)
-    points = points[keep]
+    away = (from_a > radius_at(run.start) + 0.004) & (from_b > run.end_radius + 0.004)
+    if reach_m == math.inf:
+        line = _fit(points[away], b - a, pixel_m)
+        return line, line
+    at_end, at_start = away & (from_b < reach_m), away & (from_a < reach_m)
+    end_line = _fit(points[at_end], b - a, pixel_m)
+    if np.array_equal(at_end, at_start):  # (a run no longer than the reach: one segment)
+        return end_line, end_line
+    return end_line, _fit(points[at_start], b - a, pixel_m)
+
+
+def _fit(points: np.ndarray, towards: np.ndarray, pixel_m: float) -> Line | None:
+    """(point, unit direction ``towards`` a way) of the line through ``points``; None for
+    fewer than 5 or points not straight (further than ``STRAIGHT_PX`` from it, RMS)."""
     if len(points) < 5:
         return None
     centre = points.mean(axis=0)
@@ -196,7 +209,7 @@ def _line(run: _Run, nodes: list, radius_at, pixel_m: float,  # noqa: ANN001
         return None  # the run bends (at a node the walk did not see as a corner): no line
     angle = 0.5 * np.arctan2(2.0 * sxz, sxx - szz)
     direction = np.array([np.cos(angle), np.sin(angle)])
-    return centre, direction if np.dot(direction, b - a) >= 0 else -direction
+    return centre, direction if np.dot(direction, towards) >= 0 else -direction
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> float:
@@ -248,11 +261,11 @@ class _Builder:
         # fitted before any node moves.
         corners = set(into) - set(self.tips)
         reach = LINE_REACH * self.spacing * self.pixel_m
-        lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, True, reach)
-                 for run in self.runs if run.end in corners}
-        leaving_lines = {id(run): _line(run, self.nodes, self.radius_at, self.pixel_m, False,
-                                        reach)
-                         for run in self.runs if run.start in corners}
+        lines, leaving_lines = {}, {}
+        for run in self.runs:
+            if run.end in corners or run.start in corners:
+                lines[id(run)], leaving_lines[id(run)] = _lines(
+                    run, self.nodes, self.radius_at, self.pixel_m, reach)
         for run in self.runs:
             run.was = (np.array(self.nodes[run.start]), np.array(self.nodes[run.end]))
         placed = self._first_nodes(limit_m)
@@ -296,7 +309,7 @@ class _Builder:
         for run in self.runs:
             if self.parent[run.start] >= 0 or run.inner or run.end in self.tips:
                 continue
-            line = _line(run, self.nodes, self.radius_at, self.pixel_m, False, math.inf)
+            line = _lines(run, self.nodes, self.radius_at, self.pixel_m, math.inf)[1]
             if line is None:
                 continue
             root = np.array(self.nodes[run.start])
