@@ -114,6 +114,20 @@ def test_a_pointed_blade_on_a_shoots_end_is_cut_whole_not_at_its_point():
     assert removed[1:].all() and not removed[0]
 
 
+@pytest.mark.parametrize('end, is_leaf', [((0.17, 0.17), False), ((0.13, 0.10), True)])
+def test_a_wide_end_branch_is_a_leaf_only_if_shaped_as_a_blade(end, is_leaf):
+    # A side branch 2 cm wide, as wide as leaf_end_m takes for a blade, with no narrower
+    # stretch: 5.8 cm long it is a blade (a leaf tip); 13.9 cm long (six times its width) it
+    # is a thick shoot with its tip, no leaf, however wide its end.
+    mask = (mask_of([(0.1, 0.0), (0.1, 0.05)], width_m=0.024)
+            | mask_of([(0.1, 0.05), end], width_m=0.02)
+            | mask_of([(0.1, 0.05), (0.05, 0.12)]))
+    tree = tree_of(mask)
+    assert near(tree.nodes[tree.tips], (0.05, 0.12))
+    assert near(tree.nodes[tree.tips], end) is not is_leaf
+    assert len(tree.leaf_tips) == int(is_leaf)
+
+
 @pytest.mark.parametrize('width_m', [0.006, 0.012, 0.02])
 def test_shoots_that_narrow_to_their_tips_keep_them(width_m):
     # A fork whose shoots taper to their tips, as the simulator's and real stems do: no leaf.

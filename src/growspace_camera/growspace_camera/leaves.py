@@ -14,7 +14,9 @@ times, and at least ``LEAF_RISE_PX`` more than, the narrowest radius before it.
 A blade whose base lies on the stem, or on a petiole as wide, has no narrower stalk before
 it; but a shoot's end is thin (the simulator's tips are its thinnest segments, 1.3 cm wide
 at its defaults), so an end branch ``leaf_end_m`` (1.9 cm) wide within ``END_PX`` of its end
-is a blade too, its stalk ending where the branch was last a shoot's width.
+is a blade too, its stalk ending where the branch was last a shoot's width before the blade,
+or, with no such stretch, the whole branch if it is shaped as a blade (at most
+``BLADE_ASPECT`` times as long as it is wide: a long thick stem is a shoot, whatever its end).
 
 The branch is cut where its narrowest stretch before the blade (the petiole, at most
 ``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
@@ -39,6 +41,8 @@ BLADE_FROM = 0.45  # of the branch's length: a blade's widest part lies beyond t
 SMOOTH_PX = 5  # the radius is read as a median over this many path pixels
 END_PX = 6  # a blade end is wide within this many path pixels of the end (1.5 cm)
 SHOOT_OF_BLADE = 0.6  # a blade is cut where the branch is back to this part of blade_px
+BLADE_ASPECT = 5.0  # a blade is at most this many times as long as it is wide (simple leaves
+# 2-4 times: the twin's, and a long thick stem's end branch is no leaf however wide its end)
 
 
 def cut_leaves(pred: np.ndarray, arc: np.ndarray, radius: np.ndarray, branching: np.ndarray,
@@ -109,8 +113,8 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
         # lies on the stem (or on a petiole as wide); the shoot ends where it is last thin.
         # (only before the widest part: a pointed blade is thin at its own end too)
         thin = np.flatnonzero(r[:widest] <= SHOOT_OF_BLADE * blade_px)
-        if thin.size == 0:
-            return 0
+        if thin.size == 0:  # the whole branch is a blade, if shaped as one: a shoot is longer
+            return 0 if s[-1] <= BLADE_ASPECT * 2.0 * r[widest] else None
         narrow = int(thin[-1])
     start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
     while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
