@@ -250,7 +250,8 @@ class _Builder:
         """Move each corner node to where the straight lines of its two runs meet.
 
         A thick stem's skeleton rounds its corners off (towards the inside, by up to its
-        radius); the runs' middles are straight, and where their lines cross is the node.
+        radius); the runs are straight a segment each way from it (``LINE_REACH``), away from
+        the rounding, and where their lines cross is the node.
         Nodes between two corners are then spaced evenly on the line again.
         """
         into = {run.end: run for run in self.runs}
