@@ -26,9 +26,8 @@ STRAIGHT_PX = 0.75  # RMS distance of a straight run's skeleton from its line [p
 CORNER_MIN = 0.8  # of a segment: a path turning nearer its last node is a rounded corner
 TIP_BACK_PX = 4  # a tip's place across its shoot is the plant's cover from this far back
 TIP_WIDTH_PX = 2  # a tip's radius is read from the cover across its shoot this far back
-# A round end's radius is this much less than half the cover across the shoot just behind
-# the skeleton's end: the shoot narrows to its end, and blur spreads a thin end's cover
-# (twin development photos: it leaves the tips unbiased along the shoot; quartiles +-0.8 mm)
+# A round end's radius is half the cover across the shoot less this (it narrows, and blur
+# spreads a thin end's cover): the twin's tips are then unbiased, quartiles +-0.8 mm
 TIP_NARROWING_PX = 0.7
 LINE_REACH = 0.9  # of the spacing: a corner's lines are fitted within this of it (one segment)
 REFINE_LIMIT = 0.25  # a corner node moves at most this far (of the spacing) to its lines' cross
@@ -175,19 +174,15 @@ Line = tuple[np.ndarray, np.ndarray]  # (a point, a unit direction)
 
 def _lines(run: _Run, nodes: list, radius_at, pixel_m: float,  # noqa: ANN001
            reach_m: float) -> tuple[Line | None, Line | None]:
-    """The lines of a run (``_fit``) next to its end and next to its start: fitted to its
-    pixels within ``reach_m`` of that end and away from both ends, where the stems they meet
-    bend its skeleton. A run through nodes the walk placed between (a gentle bend) is
-    straight one segment at a time: fitted whole, its line is their mean."""
+    """A run's lines (``_fit``) next to its end and its start: fitted to its pixels within
+    ``reach_m`` of that end, away from both ends (the stems they meet bend its skeleton). A
+    run through nodes placed between (a gentle bend) is straight one segment at a time."""
     a, b = np.array(nodes[run.start]), np.array(nodes[run.end])
     points = run.pixels
     if len(points) < 5:
         return None, None
     from_a, from_b = np.hypot(*(points - a).T), np.hypot(*(points - b).T)
     away = (from_a > radius_at(run.start) + 0.004) & (from_b > run.end_radius + 0.004)
-    if reach_m == math.inf:
-        line = _fit(points[away], b - a, pixel_m)
-        return line, line
     at_end, at_start = away & (from_b < reach_m), away & (from_a < reach_m)
     end_line = _fit(points[at_end], b - a, pixel_m)
     if np.array_equal(at_end, at_start):  # (a run no longer than the reach: one segment)
@@ -250,16 +245,14 @@ class _Builder:
         """Move each corner node to where the straight lines of its two runs meet.
 
         A thick stem's skeleton rounds its corners off (towards the inside, by up to its
-        radius); the runs are straight a segment each way from it (``LINE_REACH``), away from
-        the rounding, and where their lines cross is the node.
+        radius); a segment each way (``LINE_REACH``) they are straight: their lines cross at it.
         Nodes between two corners are then spaced evenly on the line again.
         """
         into = {run.end: run for run in self.runs}
         out: dict[int, list[_Run]] = {}
         for run in self.runs:
             out.setdefault(run.start, []).append(run)
-        # The lines of the runs into and out of each node that may be a corner (not a tip),
-        # fitted before any node moves.
+        # The lines into and out of each node that may be a corner, fitted before any moves.
         corners = set(into) - set(self.tips)
         reach = LINE_REACH * self.spacing * self.pixel_m
         lines, leaving_lines = {}, {}
@@ -438,16 +431,13 @@ class _Builder:
         at_apex = along >= along.max() - 0.5 * self.pixel_m
         apex = offset[at_apex].mean(axis=0)
         if self.cover is None:
-            # A tip is round: its node is the centre of its end, the end's radius inside the
-            # mask's edge. The apex pixels' centres lie half a pixel inside that edge, and the
-            # distance transform counts to the background pixel's centre half a pixel beyond.
+            # A round tip's node is its end's radius inside the mask's edge (apex pixels' centres
+            # lie half a pixel inside it; the distance transform counts half a pixel beyond).
             back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
             return g.xz[end] + apex - back * d
-        # With the plant's cover, to a fraction of a pixel: the edge lies as far into the
-        # apex pixels as the plant covers them; the end's radius is half the cover across
-        # the shoot just behind the skeleton's end, less TIP_NARROWING_PX. Across the shoot,
-        # the tip is the cover's centroid over its end (from TIP_BACK_PX behind), not the
-        # apex's whole pixels.
+        # With the cover, to a fraction of a pixel: the edge lies as far into the apex pixels
+        # as the plant covers them, less the end's radius (TIP_NARROWING_PX); across the
+        # shoot, the tip is the cover's centroid over its end, not the apex's whole pixels.
         cover = self.cover[top:r + reach + 1, left:c + reach + 1][rows, cols] * mine
         px = self.pixel_m
         behind = cover[(along < 0) & (along >= -TIP_WIDTH_PX * px)].sum() / (2 * TIP_WIDTH_PX)
