@@ -114,6 +114,20 @@ def test_a_pointed_blade_on_a_shoots_end_is_cut_whole_not_at_its_point():
     assert removed[1:].all() and not removed[0]
 
 
+def test_a_shoot_passing_a_blade_that_lies_on_it_keeps_its_tip(monkeypatch):
+    # A side shoot 6 mm wide with a blade (1.6 cm wide) lying along it halfway out, then 4 cm
+    # more of shoot: a blade narrows to its point, so a branch that stays thin this long past
+    # its widest part is a shoot, and its tip is the shoot's (cut at the blade, it was a leaf
+    # tip and the shoot ended 8 cm short).
+    shoot = [(0.1, 0.06), (0.19, 0.15)]
+    mask = blade(mask_of(STEM) | mask_of(shoot, width_m=0.006), (0.125, 0.085), (0.16, 0.12))
+    tree = tree_of(mask)
+    assert tree.tips.size == 2 and len(tree.leaf_tips) == 0
+    assert near(tree.nodes[tree.tips], (0.19, 0.15))
+    monkeypatch.setattr('growspace_camera.leaves.BLADE_TAIL', np.inf)
+    assert not near(tree_of(mask).nodes[tree_of(mask).tips], (0.19, 0.15))
+
+
 @pytest.mark.parametrize('end, is_leaf', [((0.17, 0.17), False), ((0.13, 0.10), True)])
 def test_a_wide_end_branch_is_a_leaf_only_if_shaped_as_a_blade(end, is_leaf):
     # A side branch 2 cm wide, as wide as leaf_end_m takes for a blade, with no narrower

@@ -18,6 +18,9 @@ is a blade too, its stalk ending where the branch was last a shoot's width befor
 or, with no such stretch, the whole branch if it is shaped as a blade (at most
 ``BLADE_ASPECT`` times as long as it is wide: a long thick stem is a shoot, whatever its end).
 
+Either way, a blade narrows to its point: a branch that stays as thin as its stalk for more
+than ``BLADE_TAIL`` blade widths past its widest part is a shoot a blade lies on, and no leaf.
+
 The branch is cut where its narrowest stretch before the blade (the petiole, at most
 ``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
 tip. Where what is left is shorter than ``petiole_m``, the whole branch is the leaf, unless it
@@ -41,6 +44,9 @@ BLADE_FROM = 0.45  # of the branch's length: a blade's widest part lies beyond t
 SMOOTH_PX = 5  # the radius is read as a median over this many path pixels
 END_PX = 6  # a blade end is wide within this many path pixels of the end (1.5 cm)
 SHOOT_OF_BLADE = 0.6  # a blade is cut where the branch is back to this part of blade_px
+BLADE_TAIL = 1.0  # a blade narrows to its point within this many blade widths of its widest
+# part (the twin's within 0.4; pointed real blades within about 1): a branch that stays thin
+# for longer past it is a shoot passing a blade that lies on it
 BLADE_ASPECT = 5.0  # a blade is at most this many times as long as it is wide (simple leaves
 # 2-4 times: the twin's, and a long thick stem's end branch is no leaf however wide its end)
 
@@ -116,6 +122,12 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
         if thin.size == 0:  # the whole branch is a blade, if shaped as one: a shoot is longer
             return 0 if s[-1] <= BLADE_ASPECT * 2.0 * r[widest] else None
         narrow = int(thin[-1])
+    # Past the blade, a leaf narrows to its point; a shoot that a blade lies on goes on as
+    # thin as before it.
+    blade_end = widest + np.flatnonzero(r[widest:] > r[narrow] + 0.5 * LEAF_RISE_PX).max(
+        initial=0)
+    if s[-1] - s[blade_end] > BLADE_TAIL * 2.0 * r[widest]:
+        return None
     start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
     while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
             and s[narrow] - s[start - 1] <= petiole_px:
