@@ -102,15 +102,8 @@ def test_a_pointed_blade_on_a_shoots_end_is_cut_whole_not_at_its_point():
     # branch is leaf. Taking the thin point beyond the blade left a false tip there.
     radius = np.array([4.6, 4.2, 3.8, 3.8, 4.6, 4.8, 5.1, 4.6, 5.2, 5.7, 6.4, 6.4, 6.4, 6.4,
                        5.7, 5.2, 4.6, 4.6, 3.8, 2.9, 1.9, 1.4])
-    n = radius.size
-    pred = np.arange(-1, n - 1)
-    branching = np.zeros(n, bool)
-    branching[0] = True
-    removed = np.zeros(n, bool)
-    pred[0] = 99  # (the junction's own path goes on towards a base, off this array)
-    shoots, leaves = cut_leaves(pred, np.arange(n, dtype=float), radius, branching, [n - 1],
-                                removed, 1.5, 10.0, 3.8)
-    assert shoots == [] and leaves == [n - 1]
+    shoots, leaves, removed = _cut_one_branch(radius)
+    assert shoots == [] and leaves == [radius.size - 1]
     assert removed[1:].all() and not removed[0]
 
 
@@ -126,6 +119,33 @@ def test_a_shoot_passing_a_blade_that_lies_on_it_keeps_its_tip(monkeypatch):
     assert near(tree.nodes[tree.tips], (0.19, 0.15))
     monkeypatch.setattr('growspace_camera.leaves.BLADE_TAIL', np.inf)
     assert not near(tree_of(mask).nodes[tree_of(mask).tips], (0.19, 0.15))
+
+
+def test_a_thick_stem_that_narrows_to_a_blunt_shoot_is_no_blade():
+    # Radii (px) along an end branch of an old-twin photo: a leading stem 4.8 cm wide for
+    # 12 cm, then a shoot 1.9 cm wide for 4 cm to its end. Wide at its end and never thin
+    # before, and only 4.8 times as long as it is wide, it was taken whole for a blade and the
+    # plant's lead was lost (reward 0.33 for the simulator's 1.0); a blade narrows to its
+    # point past its widest part, and this goes on for 2 of its widths.
+    radius = np.array([9.4, 9.8, 9.3, 9.7, 10.1, 9.6, 10.1] + [10.5] * 9 + [10.1]
+                      + [9.6] * 30 + [8.6, 8.2, 7.8, 6.8, 6.4, 6.0, 5.5, 5.1, 4.6, 4.2]
+                      + [3.8] * 16 + [4.2, 4.6, 4.6, 4.2, 3.8, 3.8, 2.9])
+    shoots, leaves, removed = _cut_one_branch(radius)
+    assert shoots == [radius.size - 1] and leaves == [] and not removed.any()
+
+
+def _cut_one_branch(radius: np.ndarray) -> tuple[list[int], list[int], np.ndarray]:
+    """``cut_leaves`` on one end branch, a pixel per radius, leaving a junction at pixel 0
+    (petiole_m 10 px, leaf_end_m 7.6 px): (shoot ends, leaf ends, pixels removed)."""
+    n = radius.size
+    pred = np.arange(-1, n - 1)
+    pred[0] = 99  # (the junction's own path goes on towards a base, off this array)
+    branching = np.zeros(n, bool)
+    branching[0] = True
+    removed = np.zeros(n, bool)
+    shoots, leaves = cut_leaves(pred, np.arange(n, dtype=float), radius, branching, [n - 1],
+                                removed, 1.5, 10.0, 3.8)
+    return shoots, leaves, removed
 
 
 @pytest.mark.parametrize('end, is_leaf', [((0.17, 0.17), False), ((0.13, 0.10), True)])

@@ -18,8 +18,9 @@ is a blade too, its stalk ending where the branch was last a shoot's width befor
 or, with no such stretch, the whole branch if it is shaped as a blade (at most
 ``BLADE_ASPECT`` times as long as it is wide: a long thick stem is a shoot, whatever its end).
 
-Either way, a blade narrows to its point: a branch that stays as thin as its stalk for more
-than ``BLADE_TAIL`` blade widths past its widest part is a shoot a blade lies on, and no leaf.
+Either way, a blade narrows to its point: a branch that stays as wide as its stalk (or, taken
+whole, as half the blade) for more than ``BLADE_TAIL`` blade widths past its widest part is a
+shoot, one that a blade lies on or a thick stem narrowing to a blunt end, and no leaf.
 
 The branch is cut where its narrowest stretch before the blade (the petiole, at most
 ``petiole_m`` of it) begins: the shoot ends there, and the branch's end is reported as a leaf
@@ -120,16 +121,21 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
         # (only before the widest part: a pointed blade is thin at its own end too)
         thin = np.flatnonzero(r[:widest] <= SHOOT_OF_BLADE * blade_px)
         if thin.size == 0:  # the whole branch is a blade, if shaped as one: a shoot is longer
-            return 0 if s[-1] <= BLADE_ASPECT * 2.0 * r[widest] else None
+            blade = s[-1] <= BLADE_ASPECT * 2.0 * r[widest] \
+                and _narrows(s, r, widest, 0.5 * r[widest])
+            return 0 if blade else None
         narrow = int(thin[-1])
-    # Past the blade, a leaf narrows to its point; a shoot that a blade lies on goes on as
-    # thin as before it.
-    blade_end = widest + np.flatnonzero(r[widest:] > r[narrow] + 0.5 * LEAF_RISE_PX).max(
-        initial=0)
-    if s[-1] - s[blade_end] > BLADE_TAIL * 2.0 * r[widest]:
-        return None
+    if not _narrows(s, r, widest, r[narrow] + 0.5 * LEAF_RISE_PX):
+        return None  # a shoot that a blade lies on goes on as thin as before it
     start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
     while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
             and s[narrow] - s[start - 1] <= petiole_px:
         start -= 1
     return int(own[start])
+
+
+def _narrows(s: np.ndarray, r: np.ndarray, widest: int, level: float) -> bool:
+    """Whether the branch ends within ``BLADE_TAIL`` blade widths of where it was last wider
+    than ``level`` past its widest part, as a blade narrows to its point."""
+    last = widest + int(np.flatnonzero(r[widest:] > level).max(initial=0))
+    return bool(s[-1] - s[last] <= BLADE_TAIL * 2.0 * r[widest])
