@@ -13,8 +13,7 @@ MARKERS = 'markers'  # too few markers for a fit and no last good fit to hold
 FIT = 'fit'  # the markers do not agree with the layout (moved, misprinted, wrong ids)
 NO_PLANT = 'no_plant'  # nothing plant-like in the chamber (an empty pot)
 PLANTS = 'plants'  # not as many stem bases as the challenge has plants, or plants not told apart
-UNEXPLAINED = 'unexplained'  # the measured trees do not explain the mask (most of it reaches
-# no stem base, a net of loops, or the reward is read where a loop hides a branch's end)
+UNEXPLAINED = 'unexplained'  # most of the plant mask is not part of any plant from a stem base
 BAD_INPUT = 'bad_input'  # a request the camera cannot serve (unknown challenge, bad target)
 CODES = (NO_PHOTO, EXPOSURE, MARKERS, FIT, NO_PLANT, PLANTS, UNEXPLAINED, BAD_INPUT)
 

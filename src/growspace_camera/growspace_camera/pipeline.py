@@ -9,7 +9,7 @@ numbers, so a caller never gets a reward the photo did not give.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import time
 
 import cv2
@@ -29,8 +29,6 @@ from growspace_sim.core.light import Light
 from growspace_sim.core.state import ChamberState
 
 MIN_PHOTO_PX = 16  # a smaller photo cannot hold four readable markers (camera_node's width)
-OPEN_END_M = 0.01  # how far a branch may go on unseen past a loop's cut (the bench's tip
-# tolerance): where the reward's node is such an end, the reward is known no better
 
 
 @dataclass(frozen=True)
@@ -60,12 +58,6 @@ class PipelineParams:
     # every step: 209 of 28 episodes): of the 8 beyond 0.25, 5 had a reward off by more than
     # 0.05; of the 201 within it, 14 (the twin draws each plant's stems 0.85-1.2 times as wide).
     max_share_gap: float = 0.25
-    # Largest change of the reward that a branch ``OPEN_END_M`` longer would make, where the
-    # node nearest the target ends its branch with no tip: a loop's cut (the branch crosses or
-    # touches another, or a leaf, there), so the photo does not show where it ends. On the
-    # twin's development photos (tuning combinations, 8 episodes), the 7 it refused were all
-    # more than 0.05 off, and the 4 such ends it kept (targets 29 cm away or more) were not.
-    max_open_end_error: float = 0.05
 
 
 @dataclass
@@ -220,7 +212,6 @@ class Pipeline:
         out.state = state = measured_state(tree, cfg, light, target, steps)
         check_shares(tree, p.max_share_gap)  # (once the plant count is the challenge's)
         reward, plant_rewards, success = score(state, cfg)
-        check_open_ends(tree, state, cfg, float(reward), p.max_open_end_error)
         out.reward, out.plant_rewards, out.success = float(reward), plant_rewards, bool(success)
         clock.lap('reward')
         out.observation = self.observer.image(state, cfg)
@@ -248,33 +239,6 @@ def check_loops(tree: PlantTree, max_loops: int) -> None:
         raise CameraError(UNEXPLAINED, f'the plant mask is a net of {tree.loops} loops '
                           f'(max_loops = {max_loops}): not a plant seen from the side, whose '
                           f'branches cross a few times (a top view, a tangle or a mat of leaves)')
-
-
-def check_open_ends(tree: PlantTree, state: ChamberState, cfg: SimConfig, reward: float,
-                    max_error: float) -> None:
-    """Raises CameraError ``UNEXPLAINED`` when a plant's node nearest the target (what the
-    distance rewards read) ends its branch with no tip, where a loop in the mask was cut
-    (branches or a leaf crossing or touching), and the branch going on ``OPEN_END_M`` further
-    would change the reward by more than ``max_error``."""
-    if not np.isfinite(state.nearest).any():
-        return  # (no point target: the reward reads no node's distance)
-    has_child = np.zeros(len(tree.nodes), bool)
-    has_child[tree.parent[tree.parent >= 0]] = True
-    open_end = ~has_child
-    open_end[tree.tips] = False
-    open_end[:tree.plants] = False
-    distance = np.abs(state.pos - state.target)
-    nearer = state.nearest.copy()
-    for plant in np.flatnonzero(np.isfinite(state.nearest)):
-        node = int(np.argmin(np.where(tree.plant == plant, distance, np.inf)))
-        if node >= tree.plants and open_end[node]:
-            nearer[plant] = max(0.0, nearer[plant] - OPEN_END_M)
-    error = abs(score(replace(state, nearest=nearer), cfg)[0] - reward)
-    if error > max_error:
-        raise CameraError(UNEXPLAINED, f'the branch nearest the target ends with no tip where '
-                          f'it crosses or touches another branch or a leaf in the photo: '
-                          f'{OPEN_END_M * 100:g} cm more of it, unseen, would change the reward '
-                          f'by {error:.3f} > max_open_end_error {max_error:g}')
 
 
 def check_shares(tree: PlantTree, max_gap: float) -> None:

@@ -112,11 +112,6 @@ class CameraParams:
     max_share_gap: float = param(0.25, "largest gap between touching plants' shares of the "
                                  "skeleton and their stems' (radius cubed); more: the photo "
                                  'is refused (plants)', unit='fraction', bounds=Bounds(0.0, 1.0))
-    max_open_end_error: float = param(0.05, 'largest change of the reward that 1 cm more of '
-                                      'the branch nearest the target would make where it ends '
-                                      'with no tip (crossing or touching another); more: the '
-                                      'photo is refused (unexplained)', unit='1',
-                                      bounds=Bounds(0.0, 1.0))
     segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',
                                       unit='1', bounds=Bounds(0.05, 1.0))
     frame_id: str = frame_param('chamber', 'frame of plant state and measurements')
@@ -134,7 +129,7 @@ class CameraParams:
         tree = TreeParams(**{f.name: getattr(self, f.name) for f in fields(TreeParams)})
         return PipelineParams(layout, segment, tree, self.max_fit_error_m,
                               self.max_unexplained, load_lens(self.lens) if self.lens else None,
-                              self.max_loops, self.max_share_gap, self.max_open_end_error)
+                              self.max_loops, self.max_share_gap)
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
@@ -143,7 +138,7 @@ _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 PIPELINE_FIELDS = ('markers', 'lens',
                    *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
                    *(f.name for f in fields(TreeParams)), 'max_fit_error_m',
-                   'max_unexplained', 'max_loops', 'max_share_gap', 'max_open_end_error')
+                   'max_unexplained', 'max_loops', 'max_share_gap')
 
 
 def pipeline_values(params: CameraParams) -> dict[str, Any]:
