@@ -46,8 +46,8 @@ SMOOTH_PX = 5  # the radius is read as a median over this many path pixels
 END_PX = 6  # a blade end is wide within this many path pixels of the end (1.5 cm)
 SHOOT_OF_BLADE = 0.6  # a blade is cut where the branch is back to this part of blade_px
 BLADE_TAIL = 1.0  # a blade narrows to its point within this many blade widths of its widest
-# part (the twin's within 0.4; pointed real blades within about 1): a branch that stays thin
-# for longer past it is a shoot passing a blade that lies on it
+# part (the twin's within 0.4; pointed real blades within about 1): a branch that goes on for
+# longer is a shoot (one a blade lies on, or a thick stem narrowing to a blunt end)
 BLADE_ASPECT = 5.0  # a blade is at most this many times as long as it is wide (simple leaves
 # 2-4 times: the twin's, and a long thick stem's end branch is no leaf however wide its end)
 
