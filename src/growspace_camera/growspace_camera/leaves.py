@@ -125,11 +125,11 @@ def _leaf_cut(path: list[int], arc: np.ndarray, radius: np.ndarray, widening: fl
                 and _narrows(s, r, widest, 0.5 * r[widest])
             return 0 if blade else None
         narrow = int(thin[-1])
-    if not _narrows(s, r, widest, r[narrow] + 0.5 * LEAF_RISE_PX):
+    stalk = r[narrow] + 0.5 * LEAF_RISE_PX  # as wide as the stalk, within half a rise
+    if not _narrows(s, r, widest, stalk):
         return None  # a shoot that a blade lies on goes on as thin as before it
     start = narrow  # back along the petiole (at most petiole_m of it) to the shoot's end
-    while start > 0 and r[start - 1] <= r[narrow] + 0.5 * LEAF_RISE_PX \
-            and s[narrow] - s[start - 1] <= petiole_px:
+    while start > 0 and r[start - 1] <= stalk and s[narrow] - s[start - 1] <= petiole_px:
         start -= 1
     return int(own[start])
 

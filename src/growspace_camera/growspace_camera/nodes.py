@@ -436,8 +436,8 @@ class _Builder:
             back = max(0.0, float(g.radius[end]) - 1.0) * self.pixel_m
             return g.xz[end] + apex - back * d
         # With the cover, to a fraction of a pixel: the edge lies as far into the apex pixels
-        # as the plant covers them, less the end's radius (TIP_NARROWING_PX); across the
-        # shoot, the tip is the cover's centroid over its end, not the apex's whole pixels.
+        # as the plant covers them, less the end's radius (half the cover across the shoot
+        # behind it, less TIP_NARROWING_PX); across it, the cover's centroid over its end.
         cover = self.cover[top:r + reach + 1, left:c + reach + 1][rows, cols] * mine
         px = self.pixel_m
         behind = cover[(along < 0) & (along >= -TIP_WIDTH_PX * px)].sum() / (2 * TIP_WIDTH_PX)
