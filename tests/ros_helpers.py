@@ -25,12 +25,31 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from growspace_sim.node.main import installed_executable as sim_node_executable
+from growspace_sim.node.rclpy_transport import RclpyTransport
+from growspace_sim.ros.interface import COMMAND_QOS
 from waiting import wait_until
 
 TIMEOUT_S = 20.0
 COMMANDS = QoSProfile(depth=100)
 OBSERVATIONS = QoSProfile(depth=10)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # chamber/config
+
+
+def wait_until_idle(namespace: str, timeout_s: float = 30.0) -> None:
+    """Until gantry_node in ``namespace`` reports its controller Idle (connected, settings
+    checked): before that it refuses a reset (``gantry not ready``), as it should."""
+    listener = RclpyTransport('idle_listener', namespace)
+    try:
+        idle: list = []
+        listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status', COMMAND_QOS,
+                           lambda m, _: idle.extend(s for s in m.status
+                                                    if s.message.startswith('Idle')))
+        deadline = time.monotonic() + timeout_s
+        while not idle and time.monotonic() < deadline:
+            listener.spin_once(0.05)
+        assert idle, f'the gantry in {namespace} never stood Idle within {timeout_s} s'
+    finally:
+        listener.close()
 
 
 class NodeProcess:

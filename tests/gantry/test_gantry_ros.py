@@ -24,7 +24,7 @@ from growspace_sim.replay import compare, format_comparison
 from growspace_sim.ros import convert
 from growspace_sim.ros import types
 from growspace_sim.ros.interface import COMMAND_QOS
-from ros_helpers import NodeProcess
+from ros_helpers import NodeProcess, wait_until_idle
 from test_gantry_node import RIG
 
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
@@ -55,6 +55,7 @@ def test_bridge_link_drives_the_gantry_then_sigterm_mid_move(grbl: GrblEmulator)
     node = start_gantry(grbl)
     transport = RclpyTransport('gantry_test_client', '/gs_test')
     try:
+        wait_until_idle('/gs_test')  # before that it refuses a reset: the controller boots
         link = ChamberLink(transport, with_state=True, with_image=False)
         config = link.connect(20.0)
         assert config['source'] == 'gantry'
@@ -107,19 +108,10 @@ def replay_onto_gantry(tmp_path, *params: str, **play: Any) -> Any:
         node = NodeProcess('-p', f'port:={grbl.port}', '-p', 'seed:=5', '-p', 'status_hz:=50.0',
                            '-p', f'record_path:={tmp_path / "hardware.mcap"}', *params,
                            namespace='/growspace', executable=gantry_executable())
-        listener = RclpyTransport('replay_listener', '/growspace')
         try:
-            idle: list = []
-            listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status',
-                               COMMAND_QOS, lambda m, _: idle.extend(
-                                   s for s in m.status if s.message.startswith('Idle')))
-            deadline = time.monotonic() + 20.0
-            while not idle and time.monotonic() < deadline:
-                listener.spin_once(0.05)
-            assert idle, 'the gantry never stood Idle'
+            wait_until_idle('/growspace')
             return play_steps(BAG, wait_for_subscribers_s=20.0, step_timeout_s=60.0, **play)
         finally:
-            listener.close()
             node.stop()
 
 

@@ -19,7 +19,8 @@ from growspace_sim.recording import split_files
 from growspace_sim.replay import Bag, read_episodes
 from growspace_sim.rig.rundir import read_journal
 from growspace_sim.rig.runner import reset_id_of
-from test_rig_ros import grbl, NAMESPACE, start_camera, start_gantry, wait_until_idle  # noqa: F401
+from test_rig_ros import grbl, NAMESPACE, start_camera, start_gantry  # noqa: F401
+from ros_helpers import wait_until_idle
 from waiting import wait_until
 
 pytestmark = pytest.mark.slow
@@ -53,7 +54,7 @@ def test_a_killed_gantry_node_resumes_the_episode_and_every_step_is_recorded_onc
     gantry = _gantry(grbl, recording)
     runner = None
     try:
-        wait_until_idle()
+        wait_until_idle(NAMESPACE)
         runner = subprocess.Popen(
             _rig('run', str(run), '--chamber', 'attach', '--namespace', NAMESPACE,
                  '--episodes', '1', '--seed', '5', '--step-timeout', '15', '--retry-period',
@@ -69,7 +70,7 @@ def test_a_killed_gantry_node_resumes_the_episode_and_every_step_is_recorded_onc
         assert killed_at < EPISODE_LENGTH
 
         gantry = _gantry(grbl, recording, '-p', f'resume_path:={recording}')
-        wait_until_idle()
+        wait_until_idle(NAMESPACE)
         resumed = subprocess.run(_rig('resume', str(run)), capture_output=True, text=True,
                                  timeout=TIMEOUT_S)
     finally:

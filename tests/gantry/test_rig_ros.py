@@ -28,9 +28,8 @@ from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.node.rclpy_transport import RclpyTransport
 from growspace_sim.replay.bag import Bag
 from growspace_sim.ros import convert, types
-from growspace_sim.ros.interface import COMMAND_QOS
 from growspace_sim.simulation import Simulation
-from ros_helpers import NodeProcess
+from ros_helpers import NodeProcess, wait_until_idle
 from test_camera_ros import camera_executable
 from test_gantry_node import RIG
 from test_gantry_ros import gantry_executable
@@ -64,22 +63,6 @@ def start_camera(source: str = 'twin') -> NodeProcess:
                        executable=camera_executable())
 
 
-def wait_until_idle() -> None:
-    """Until gantry_node reports its controller Idle (connected, settings checked)."""
-    listener = RclpyTransport('rig_test_listener', NAMESPACE)
-    try:
-        idle: list = []
-        listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status', COMMAND_QOS,
-                           lambda m, _: idle.extend(s for s in m.status
-                                                    if s.message.startswith('Idle')))
-        deadline = time.monotonic() + 30.0
-        while not idle and time.monotonic() < deadline:
-            listener.spin_once(0.05)
-        assert idle, 'the gantry never stood Idle'
-    finally:
-        listener.close()
-
-
 def recorded(bag) -> list[tuple[str, object]]:
     """(topic without the namespace, message) of the recording, in its order."""
     with Bag(bag) as b:
@@ -95,7 +78,7 @@ def test_an_agent_steps_the_rig_and_the_recording_holds_each_steps_photo(grbl, t
                           '-p', f'growth_s:={GROWTH_S}')
     env = None
     try:
-        wait_until_idle()
+        wait_until_idle(NAMESPACE)
         env = GrowSpaceBridgeEnv('control', 'easy', namespace=NAMESPACE, start_node=False,
                                  timeout_s=60.0, connect_timeout_s=30.0)
         obs, info = env.reset(seed=5)
@@ -185,7 +168,7 @@ def test_a_refused_photo_and_a_missing_camera_answer_the_step_with_an_error(grbl
     camera = None
     transport = RclpyTransport('rig_test_client', NAMESPACE)
     try:
-        wait_until_idle()
+        wait_until_idle(NAMESPACE)
         link = ChamberLink(transport, with_state=True, with_image=True)
         assert link.connect(30.0)['source'] == 'gantry'
         reply = link.reset(1, seed=5, challenge='control', setting='easy', timeout_s=30.0)
