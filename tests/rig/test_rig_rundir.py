@@ -305,3 +305,36 @@ def test_the_runners_photoperiod_holds_a_step_until_lights_on_and_is_checked_whe
     with pytest.raises(RunDirError) as error:
         RunSettings(lights_on='06:00')
     assert error.value.field == 'lights_on' and 'give both' in str(error.value)
+
+
+def test_a_refused_reset_waits_for_a_person_then_goes_again_with_its_reset_id(tmp_path):
+    """A gantry still starting (or in alarm) refuses the first reset: the runner waits and sends
+    the same reset again, as it does a refused step, instead of ending the run."""
+    from growspace_sim.rig.runner import reset_id_of, Runner
+
+    class StartingRig(_FakeRig):
+        def __init__(self) -> None:
+            super().__init__(refuse=set())
+            self.resets: list[int] = []
+
+        def reset(self, reset_id: int, seed: int):
+            from growspace_sim.rig.runner import Answer
+
+            self.resets.append(reset_id)
+            if len(self.resets) <= 2:
+                return Answer('error: gantry not ready: the controller is booting')
+            return super().reset(reset_id, seed)
+
+    run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
+                                                      namespace='/rig', retry_period_s=30.0))
+    chamber, said, slept = StartingRig(), [], []
+    Runner(run, chamber, say=said.append, sleep=slept.append).run()
+    assert chamber.resets == [reset_id_of(0)] * 3 and slept == [30.0, 30.0]
+    waiting = [line for line in said if line.startswith('WAITING FOR A PERSON')]
+    assert len(waiting) == 2 and 'the reset of episode 1' in waiting[0]
+    assert 'the controller is booting' in waiting[0]
+    state = read_journal(run.journal_path)
+    assert len(state.episodes) == 1 and state.episodes[0].reset_id == reset_id_of(0)
+    assert [s.step for s in state.episodes[0].steps] == list(range(1, 51))
+    notes = [e for e in map(json.loads, open(run.journal_path)) if e['event'] == 'note']
+    assert len(notes) == 2 and 'the reset of episode 1' in notes[0]['text']

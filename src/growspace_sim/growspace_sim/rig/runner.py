@@ -26,10 +26,11 @@ Each step gets a new step_id (never one sent before), so the chamber's lockstep 
 late duplicate; the one exception, a step in progress at the crash resent to an attached
 chamber, keeps its own id for that very reason. Where the chamber refuses a step (an attached
 gantry in alarm or e-stop: a person must clear it), the runner says so, waits
-``retry_period_s`` and tries again with a new step_id. Hook for the rig's growth period and
-photoperiod (``gantry_node`` ``growth_s``, built separately): the runner only needs the step's
-answer, so a gantry step that lasts hours needs no change here beyond ``step_timeout_s``
-covering it.
+``retry_period_s`` and tries again with a new step_id; a refused reset (the same, or a gantry
+still starting) is sent again after that wait with its own reset_id. Hook for the rig's growth
+period and photoperiod (``gantry_node`` ``growth_s``, built separately): the runner only needs
+the step's answer, so a gantry step that lasts hours needs no change here beyond
+``step_timeout_s`` covering it.
 """
 
 from __future__ import annotations
@@ -176,8 +177,8 @@ class Runner:
         """Run until every episode is done; resumes if the journal holds anything.
 
         Raises:
-            RunnerError: The chamber answered what the journal cannot match, or refused a step
-                of the simulator.
+            RunnerError: The chamber answered what the journal cannot match, or the
+                simulator refused a reset or a step.
             RunDirError: The journal cannot be written.
         """
         state = self.rundir.state
@@ -208,10 +209,7 @@ class Runner:
     def _reset(self, index: int) -> None:
         seed = self.settings.episode_seed(index)
         reset_id = reset_id_of(index)
-        answer = self.chamber.reset(reset_id, seed)
-        if answer.info:
-            raise RunnerError(f'the chamber refused the reset of episode {index + 1} '
-                              f'(reset_id {reset_id}, seed {seed}): {answer.info}')
+        answer = self._accepted_reset(index, reset_id, seed)
         self.twin.reset(index, seed)
         self.rundir.append('reset', episode=index, reset_id=reset_id, seed=seed)
         self.observation = answer.observation
@@ -271,18 +269,32 @@ class Runner:
             self.rundir.append('note', text=f'episode {episode.index + 1} step {step}: the twin '
                                f'gave reward {outcome.reward!r}, the chamber {answer.reward!r}')
 
+    def _accepted_reset(self, index: int, reset_id: int, seed: int) -> Answer:
+        """Reset episode ``index``; a refusal as a step's (a gantry still starting, in alarm
+        or e-stop: nothing changed there, so the same reset_id goes again)."""
+        while True:
+            answer = self.chamber.reset(reset_id, seed)
+            if not answer.info:
+                return answer
+            what = f'the reset of episode {index + 1} (reset_id {reset_id}, seed {seed})'
+            if self.chamber.simulated:
+                raise RunnerError(f'sim_node refused {what}: {answer.info}')
+            self._wait_for_a_person(what, answer.info)
+
     def _refused(self, episode: Any, step: int, step_id: int, info: str) -> None:
         if self.chamber.simulated:
             raise RunnerError(f'sim_node refused step {step} of episode {episode.index + 1} '
                               f'(step_id {step_id}): {info}')
-        text = (f'episode {episode.index + 1} step {step} was refused by the chamber: {info}. '
-                f'If the gantry is in alarm or e-stop, a person must look at it and clear it '
-                f'(gantry/unlock, gantry/home); the runner tries again every '
-                f'{self.settings.retry_period_s:g} s.')
+        self._wait_for_a_person(f'episode {episode.index + 1} step {step}', info)
+        self._next_at = None  # the retry goes as soon as the retry period is over
+
+    def _wait_for_a_person(self, what: str, info: str) -> None:
+        text = (f'{what} was refused by the chamber: {info}. If the gantry is in alarm or '
+                f'e-stop, a person must look at it and clear it (gantry/unlock, gantry/home); '
+                f'the runner tries again every {self.settings.retry_period_s:g} s.')
         self.rundir.append('note', text=text)
         self.say(f'WAITING FOR A PERSON: {text}')
         self.sleep(self.settings.retry_period_s)
-        self._next_at = None  # the retry goes as soon as the retry period is over
 
     def _new_step_id(self, episode: Any) -> int:
         pending = self.rundir.state.pending
@@ -376,10 +388,7 @@ class Runner:
             if recorded:
                 after = recorded[-1].step
             else:
-                answer = self.chamber.reset(episode.reset_id, episode.seed)
-                if answer.info:
-                    raise RunnerError(f'resume: the chamber refused the reset of episode '
-                                      f'{episode.index + 1} again: {answer.info}')
+                answer = self._accepted_reset(episode.index, episode.reset_id, episode.seed)
                 self.observation = answer.observation
                 after = 0
             count += self._catch_up(episode, after)
