@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import json
+import re
 
+import numpy as np
 import pytest
 
 from growspace_sim.recording import RecordingError, repair, SplitRecorder, wait_until_free
@@ -307,29 +309,44 @@ def test_the_runners_photoperiod_holds_a_step_until_lights_on_and_is_checked_whe
     assert error.value.field == 'lights_on' and 'give both' in str(error.value)
 
 
-def test_a_refused_reset_waits_for_a_person_then_goes_again_with_its_reset_id(tmp_path):
+class _StartingRig(_FakeRig):
+    """Refuses its first ``refusals`` resets with ``info``, as gantry_node does while starting."""
+
+    def __init__(self, refusals: int, info: str, simulated: bool = False) -> None:
+        super().__init__(refuse=set())
+        self.refusals, self.info, self.simulated = refusals, info, simulated
+        self.resets: list[int] = []
+
+    def reset(self, reset_id: int, seed: int):
+        from growspace_sim.rig.runner import Answer
+
+        self.resets.append(reset_id)
+        if len(self.resets) <= self.refusals:
+            return Answer(self.info, observation=np.full((2, 2, 3), 7, np.uint8))  # not kept
+        return super().reset(reset_id, seed)
+
+
+def test_a_reset_refused_as_not_ready_waits_for_a_person_then_goes_again(tmp_path):
     """A gantry still starting (or in alarm) refuses the first reset: the runner waits and sends
     the same reset again, as it does a refused step, instead of ending the run."""
     from growspace_sim.rig.runner import reset_id_of, Runner
 
-    class StartingRig(_FakeRig):
-        def __init__(self) -> None:
-            super().__init__(refuse=set())
-            self.resets: list[int] = []
-
-        def reset(self, reset_id: int, seed: int):
-            from growspace_sim.rig.runner import Answer
-
-            self.resets.append(reset_id)
-            if len(self.resets) <= 2:
-                return Answer('error: gantry not ready: the controller is booting')
-            return super().reset(reset_id, seed)
-
     run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
                                                       namespace='/rig', retry_period_s=30.0))
-    chamber, said, slept = StartingRig(), [], []
-    Runner(run, chamber, say=said.append, sleep=slept.append).run()
+    chamber = _StartingRig(2, 'error: gantry not ready: the controller is booting')
+    said, slept = [], []
+    runner = Runner(run, chamber, say=said.append, sleep=slept.append)
+    observations = []  # what the policy is given at each step
+    real_step = chamber.step
+
+    def step(*args):
+        observations.append(runner.observation)
+        return real_step(*args)
+
+    chamber.step = step
+    runner.run()
     assert chamber.resets == [reset_id_of(0)] * 3 and slept == [30.0, 30.0]
+    assert observations[0].shape != (2, 2, 3)  # the accepted reset's observation
     waiting = [line for line in said if line.startswith('WAITING FOR A PERSON')]
     assert len(waiting) == 2 and 'the reset of episode 1' in waiting[0]
     assert 'the controller is booting' in waiting[0]
@@ -338,3 +355,20 @@ def test_a_refused_reset_waits_for_a_person_then_goes_again_with_its_reset_id(tm
     assert [s.step for s in state.episodes[0].steps] == list(range(1, 51))
     notes = [e for e in map(json.loads, open(run.journal_path)) if e['event'] == 'note']
     assert len(notes) == 2 and 'the reset of episode 1' in notes[0]['text']
+
+
+@pytest.mark.parametrize('info, simulated', [
+    ('error: light x = 1.2 m is outside its travel [0.0, 1.0]', False),  # refused again
+    ('error: gantry not ready: the controller is booting', True),  # a simulator never is
+])
+def test_a_reset_refused_for_good_ends_the_run_at_once(tmp_path, info, simulated):
+    from growspace_sim.rig.runner import Runner, RunnerError
+
+    run = RunDir.create(tmp_path / 'run', RunSettings(policy='random', chamber='attach',
+                                                      namespace='/rig', retry_period_s=30.0))
+    chamber, slept = _StartingRig(1, info, simulated), []
+    with pytest.raises(RunnerError, match='the chamber refused the reset of episode 1 '
+                       r'\(reset_id \d+, seed \d+\): ' + re.escape(info)):
+        Runner(run, chamber, say=lambda line: None, sleep=slept.append).run()
+    assert len(chamber.resets) == 1 and slept == []
+    assert read_journal(run.journal_path).episodes == []

@@ -56,7 +56,7 @@ from growspace_sim import __version__
 from growspace_sim.core.chamber import StepOutcome
 from growspace_sim.core.config import SimConfig
 from growspace_sim.core.errors import CommandError
-from growspace_sim.node.chamber_node import EPISODE_OVER, Recorder, step_id_error
+from growspace_sim.node.chamber_node import EPISODE_OVER, NOT_READY, Recorder, step_id_error
 from growspace_sim.node.transport import Transport
 from growspace_sim.ros import convert
 from growspace_sim.ros import qos as ros_qos, types
@@ -185,7 +185,7 @@ class GantryNode:
         reason = self.safety.refusal(relative and not recorded) or self.recording.stopped
         if reason:
             self._refused('command:refused', f'light/command: not sent: {reason}',
-                          step_id if lockstep else None, f'error: gantry not ready: {reason}')
+                          step_id if lockstep else None, f'error: {NOT_READY}: {reason}')
             return
         if lockstep and (self.pending or self.step_time.busy or self.photo and self.photo.busy):
             self._fail_pending(f'superseded by a newer command (step_id {step_id})')  # redone
@@ -217,7 +217,7 @@ class GantryNode:
         reason = self.safety.refusal(relative=False) or self.recording.stopped
         try:
             if reason:
-                raise ValueError(f'gantry not ready: {reason}')
+                raise ValueError(f'{NOT_READY}: {reason}')
             seed, challenge, setting = convert.reset_args(msg)
             changes = {k: v for k, v in (('challenge', challenge), ('setting', setting)) if v}
             cfg = self.cfg.replace(**changes) if changes else self.cfg

@@ -37,10 +37,11 @@ from growspace_sim.ros.interface import (
     digit_fingerprint, growspace_metadata)
 from growspace_sim.simulation import Simulation
 
-__all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'OBSERVATION_QOS', 'OUTPUTS',
-           'Recorder']
+__all__ = ['ChamberNode', 'COMMAND_QOS', 'EPISODE_OVER', 'INPUTS', 'NOT_READY', 'OBSERVATION_QOS',
+           'OUTPUTS', 'Recorder']
 
 EPISODE_OVER = 'episode over; send a reset'
+NOT_READY = 'gantry not ready'  # a refusal worth waiting out: starting, in alarm or e-stop
 
 
 def step_id_error(step_id: int, last_step_id: int, log: Any) -> str:

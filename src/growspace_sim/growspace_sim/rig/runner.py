@@ -26,11 +26,11 @@ Each step gets a new step_id (never one sent before), so the chamber's lockstep 
 late duplicate; the one exception, a step in progress at the crash resent to an attached
 chamber, keeps its own id for that very reason. Where the chamber refuses a step (an attached
 gantry in alarm or e-stop: a person must clear it), the runner says so, waits
-``retry_period_s`` and tries again with a new step_id; a refused reset (the same, or a gantry
-still starting) is sent again after that wait with its own reset_id. Hook for the rig's growth
-period and photoperiod (``gantry_node`` ``growth_s``, built separately): the runner only needs
-the step's answer, so a gantry step that lasts hours needs no change here beyond
-``step_timeout_s`` covering it.
+``retry_period_s`` and tries again with a new step_id; a reset refused as not ready (the same,
+or a gantry still starting) is sent again after that wait with its own reset_id. Hook for the
+rig's growth period and photoperiod (``gantry_node`` ``growth_s``, built separately): the
+runner only needs the step's answer, so a gantry step that lasts hours needs no change here
+beyond ``step_timeout_s`` covering it.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from growspace_sim.core.config import SimConfig
+from growspace_sim.node.chamber_node import NOT_READY
 from growspace_sim.rig.policies import make_policy, Twin
 from growspace_sim.rig.rundir import format_progress, RunDir, RunDirError, RunSettings
 from growspace_sim.ros import convert, types
@@ -177,8 +178,8 @@ class Runner:
         """Run until every episode is done; resumes if the journal holds anything.
 
         Raises:
-            RunnerError: The chamber answered what the journal cannot match, or the
-                simulator refused a reset or a step.
+            RunnerError: The chamber answered what the journal cannot match, refused a
+                reset for good, or was the runner's own sim_node and refused a step.
             RunDirError: The journal cannot be written.
         """
         state = self.rundir.state
@@ -270,15 +271,17 @@ class Runner:
                                f'gave reward {outcome.reward!r}, the chamber {answer.reward!r}')
 
     def _accepted_reset(self, index: int, reset_id: int, seed: int) -> Answer:
-        """Reset episode ``index``; a refusal as a step's (a gantry still starting, in alarm
-        or e-stop: nothing changed there, so the same reset_id goes again)."""
+        """Reset episode ``index``. A gantry not ready (still starting, in alarm or e-stop) is
+        waited out as a refused step is, and the same reset_id goes again (a refused reset
+        changed nothing); any other refusal (a layout beyond the travel, a bad argument)
+        would be refused again, so it ends the run."""
         while True:
             answer = self.chamber.reset(reset_id, seed)
             if not answer.info:
                 return answer
             what = f'the reset of episode {index + 1} (reset_id {reset_id}, seed {seed})'
-            if self.chamber.simulated:
-                raise RunnerError(f'sim_node refused {what}: {answer.info}')
+            if self.chamber.simulated or not answer.info.startswith(f'error: {NOT_READY}'):
+                raise RunnerError(f'the chamber refused {what}: {answer.info}')
             self._wait_for_a_person(what, answer.info)
 
     def _refused(self, episode: Any, step: int, step_id: int, info: str) -> None:
