@@ -44,10 +44,8 @@ def wait_until_idle(namespace: str, timeout_s: float = 30.0) -> None:
         listener.subscribe('diagnostic_msgs/msg/DiagnosticArray', 'gantry/status', COMMAND_QOS,
                            lambda m, _: idle.extend(s for s in m.status
                                                     if s.message.startswith('Idle')))
-        deadline = time.monotonic() + timeout_s
-        while not idle and time.monotonic() < deadline:
-            listener.spin_once(0.05)
-        assert idle, f'the gantry in {namespace} never stood Idle within {timeout_s} s'
+        wait_until(lambda: idle, timeout_s, f'gantry_node in {namespace} reports Idle',
+                   between=lambda: listener.spin_once(0.05))
     finally:
         listener.close()
 

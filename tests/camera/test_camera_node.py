@@ -329,9 +329,9 @@ def test_camera_nodes_defaults_are_the_pipelines():
     from growspace_camera.pipeline import PipelineParams
 
     assert CameraParams().pipeline(MarkerLayout()) == PipelineParams(MarkerLayout())
-    rig = CameraParams(max_loops=40, max_share_gap=0.4, max_unexplained=0.3)
-    assert (rig.pipeline(MarkerLayout()).max_loops, rig.pipeline(MarkerLayout()).max_share_gap,
-            rig.pipeline(MarkerLayout()).max_unexplained) == (40, 0.4, 0.3)
+    rig = CameraParams(max_loops=40, max_share_gap=0.4,
+                       max_unexplained=0.3).pipeline(MarkerLayout())
+    assert (rig.max_loops, rig.max_share_gap, rig.max_unexplained) == (40, 0.4, 0.3)
 
 
 def test_bad_marker_files_are_refused_naming_the_file_and_key(tmp_path):
