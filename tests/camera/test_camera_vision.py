@@ -216,6 +216,44 @@ def test_plant_cover_places_a_blurred_stem_to_a_fraction_of_a_pixel(axis_px):
     assert not seg.coverage[:, :30].any()  # nothing far from the plant
 
 
+def _stem_photo(stems: list[tuple[int, int, int]], pale: list[tuple[slice, slice]]) -> np.ndarray:
+    """A rectified photo (100 x 100 grid pixels, 2.5 mm): grey board, green stems (column,
+    top row, bottom row; 3 pixels wide) and stretches of stem too pale for the threshold (ExG
+    about 0.045, between half ``min_greenness`` and all of it)."""
+    board, stem = np.float32(150.0), np.array((60.0, 140.0, 70.0), np.float32)
+    photo = np.full((100, 100, 3), board, np.float32)
+    for col, top, bottom in stems:
+        photo[top:bottom + 1, col - 1:col + 2] = stem
+    for rows, cols in pale:
+        photo[rows, cols] = board + 0.137 * (stem - board)
+    return photo
+
+
+def _pieces(mask: np.ndarray) -> int:
+    return cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)[0] - 1
+
+
+@pytest.mark.parametrize('pale_rows, pieces', [(5, 1), (10, 2)])
+def test_a_shoot_cut_off_by_a_pale_stretch_is_joined_back_when_the_stretch_is_short(
+        pale_rows, pieces):
+    # A stem from the soil line up to row 51, a pale stretch, the shoot above it. Blurred by
+    # the segmentation, 5 pale rows leave 3 below the threshold (7.5 mm, more than the mask's
+    # closing fills): bridged. 10 leave 8 (2 cm, over MAX_GAP_M): the shoot stays apart.
+    top = 51 - pale_rows
+    photo = _stem_photo([(50, 51, 99), (50, top - 30, top - 1)], [(slice(top, 51), slice(49, 52))])
+    seg = plant_mask(photo, SegmentParams())
+    assert seg.threshold == pytest.approx(SegmentParams().min_greenness)
+    assert _pieces(seg.mask) == pieces
+    assert seg.mask[top - 30:top].any() and seg.mask[51:].any()
+
+
+def test_two_stems_standing_on_the_soil_line_are_never_joined_by_a_pale_stretch():
+    # Two stems from the floor whose tops a short pale stretch joins: two plants' business
+    # (the plant count), not a gap in one plant.
+    photo = _stem_photo([(40, 40, 99), (48, 40, 99)], [(slice(40, 43), slice(41, 47))])
+    assert _pieces(plant_mask(photo, SegmentParams()).mask) == 2
+
+
 def test_hysteresis_is_scikit_images():
     rng = np.random.default_rng(3)
     for _ in range(5):

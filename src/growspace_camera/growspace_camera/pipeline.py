@@ -195,7 +195,7 @@ class Pipeline:
         out.grid = grid = Grid(cfg.chamber_width, cfg.chamber_height, p.segment.pixel_m)
         rectified = rectify(photo, report.fit, grid)
         clock.lap('rectify')
-        out.segmentation = seg = plant_mask(rectified, p.segment)
+        out.segmentation = seg = plant_mask(rectified, p.segment, p.tree.base_band_m)
         c.threshold, c.contrast, c.specks = seg.threshold, seg.contrast, seg.specks
         c.plant_pixels = int(np.count_nonzero(seg.mask))
         clock.lap('segment')

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from skimage.graph import MCP_Geometric
 
 from growspace_camera.calibration import PlaneFit
 from growspace_camera.errors import CameraError, EXPOSURE
@@ -33,6 +34,8 @@ BARK_DILUTION = 0.5  # the constant in the warmth's sum, in backdrop grey levels
 BROWN_WEIGHT = 0.6  # a bark pixel's tissue index per unit of darkness
 STRIP_FRACTION = 0.5  # a mask column this full of photo-grey pixels is an unlit strip
 FLOOR_M = 0.005  # the grid's rows this close to the soil line are checked against those above
+PALE = 0.5  # a gap in a plant is bridged through pixels down to this part of ``min_greenness``
+MAX_GAP_M = 0.01  # ... when the gap is at most this long [m]
 _SUM = np.array([[1.0, 1.0, 1.0]], np.float32)  # b + g + r
 _EXCESS_GREEN = np.array([[-1.0, 2.0, -1.0]], np.float32)  # 2g - r - b (BGR order)
 _WARMTH = np.array([[-1.0, 0.0, 1.0]], np.float32)  # r - b
@@ -214,7 +217,7 @@ def _unit(x: np.ndarray, top: float = 1.0) -> np.ndarray:
     return cv2.threshold(x, 0.0, 0.0, cv2.THRESH_TOZERO, dst=x)[1]
 
 
-def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
+def plant_mask(bgr: np.ndarray, params: SegmentParams, ground_m: float = 0.03) -> Segmentation:
     """The plant's pixels in a rectified photo: balance, flat field, ExG, Otsu, clean-up.
 
     A chamber with a colour clipped in more than ``max_saturated`` of it is refused: where a
@@ -225,7 +228,10 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     the flat-fielded photo. The threshold is Otsu's, but never below ``min_greenness``;
     pixels down to half of it are kept where they join a pixel above it (hysteresis: thin
     twig ends are paler than stems). When the plant stands out from the backdrop by less than
-    ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise).
+    ``min_contrast``, nothing is plant (an empty pot must not become a plant of noise). A
+    piece of plant cut off from the rest by a stretch paler than that is joined back
+    (``_bridge``); a piece reaching within ``ground_m`` of the soil line (the skeleton's base
+    band) may stand on it, so it is never joined to another such piece.
     """
     # (``inRange`` counts the pixels with every colour below SATURATED: a tenth of the time of
     # a per-pixel maximum)
@@ -265,15 +271,20 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams) -> Segmentation:
     cv2.copyTo(np.minimum(exg, 0.0), dim, exg)
     _floor_rows(exg, params.pixel_m)
     centre = float(np.median(exg[::3, ::3]))  # the backdrop's
-    threshold = _plant_threshold(exg, params.min_greenness, centre)
+    noise = _noise(exg, centre)
+    threshold = _plant_threshold(exg, params.min_greenness, centre, noise)
     low = max(0.5 * threshold, params.min_greenness)
     # Seeds are green: brown tissue is plant where it joins green tissue (a woody stem carries
     # the shoot's leaves), while a warm, dark cabinet post, pot rim or mesh on its own is not.
     mask = _hysteresis(exg, low, threshold, green, SEED_GREENNESS)
     mask[_unlit_strips(mask.view(bool) & ~rough)] = 0
     mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     min_px = params.min_area_m2 / params.pixel_m ** 2
+    pale = max(PALE * params.min_greenness, centre + NOISE_SIGMAS * noise)
+    if pale < low:
+        _bridge(mask, exg, pale, threshold, min_px, int(np.ceil(ground_m / params.pixel_m)),
+                MAX_GAP_M / params.pixel_m)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] < min_px) + 1
     specks = int(stats[small, cv2.CC_STAT_AREA].sum())
     keep = np.ones(count, bool)
@@ -355,15 +366,68 @@ def _hysteresis(exg: np.ndarray, low: float, high: float,
     return strong[labels]
 
 
-def _plant_threshold(index: np.ndarray, floor: float, centre: float) -> float:
+def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, threshold: float, min_px: float,
+            ground_px: int, max_gap_px: float) -> None:
+    """Join each piece of ``mask`` that floats (reaches no closer than ``ground_px`` rows to
+    the soil line) to a piece that may stand on it, along the cheapest path through pixels
+    of ``exg`` above ``pale`` (a step costs ``threshold`` / ExG: the greenest way), when that
+    path crosses at most ``max_gap_px`` pixels outside the mask. In place (uint8 0/1).
+
+    A thin internode or petiole, blurred, can be paler than the threshold for a pixel or two,
+    and the shoot above it is then a piece of its own that no stem base explains (a real
+    leafy plant lost its top 15 cm that way). A longer pale stretch is left alone: the
+    unlit lines a banded lamp leaves come in pieces along a line, and joined up they made a
+    stem. Two pieces that may each stand on the soil line are two plants' business (the plant
+    count), never joined here; specks (under ``min_px``) are not joined either.
+    """
+    count, pieces, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count <= 2:
+        return
+    low = np.zeros(count, bool)
+    low[pieces[-ground_px:]] = True
+    big = stats[:, cv2.CC_STAT_AREA] >= min_px
+    grounded, floating = low & big, ~low & big
+    grounded[0] = floating[0] = False
+    regions, region, boxes, _ = cv2.connectedComponentsWithStats(
+        ((exg > pale) | (mask > 0)).view(np.uint8), connectivity=8)
+    on = mask > 0
+    held = np.unique(np.column_stack((region[on], pieces[on])), axis=0)  # (region, piece)
+    # Regions holding a floating piece and a grounded one: only there is a bridge to find.
+    has_floating = np.zeros(regions, bool)
+    has_floating[held[floating[held[:, 1]], 0]] = True
+    has_grounded = np.zeros(regions, bool)
+    has_grounded[held[grounded[held[:, 1]], 0]] = True
+    for r in np.flatnonzero(has_floating & has_grounded):
+        x, y, w, h = boxes[r, :4]
+        box = (slice(y, y + h), slice(x, x + w))
+        inside, piece = region[box] == r, pieces[box]
+        # Through the mask at almost no cost; impassable (-1) outside the region.
+        cost = threshold / np.maximum(exg[box], 1e-6)
+        steps = np.where(inside, np.where(mask[box] == 0, cost, 1e-3), -1.0)
+        paths = MCP_Geometric(steps)
+        total, _ = paths.find_costs(np.argwhere(inside & grounded[piece]))
+        for q in np.unique(piece[inside & floating[piece]]):
+            own = inside & (piece == q)
+            cells = np.argwhere(own)
+            path = paths.traceback(tuple(cells[np.argmin(total[own])]))
+            rows, cols = (np.array(path) + (y, x)).T
+            if np.count_nonzero(mask[rows, cols] == 0) <= max_gap_px:
+                mask[rows, cols] = 1
+
+
+def _noise(index: np.ndarray, centre: float) -> float:
+    """The backdrop's noise in an index whose backdrop level (median) is ``centre``: a
+    robust standard deviation (the median absolute deviation's), on every third pixel."""
+    return 1.4826 * float(np.median(np.abs(index[::3, ::3] - centre)))
+
+
+def _plant_threshold(index: np.ndarray, floor: float, centre: float, noise: float) -> float:
     """Otsu's threshold of a greenness index, capped where it stands clearly out of the
-    backdrop's noise, and never below ``floor``.
+    backdrop's ``noise``, and never below ``floor``.
 
     Otsu splits two classes; with two greens (a dark old stem under bright young shoots, or
     two plants) it splits the backdrop from the brighter one and loses the other.
     """
-    sample = index[::3, ::3]  # (``centre`` is its median)
-    noise = 1.4826 * float(np.median(np.abs(sample - centre)))  # robust sigma (MAD)
     return max(min(_otsu(index), centre + NOISE_SIGMAS * noise), floor)
 
 
