@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from skimage.graph import MCP_Geometric
 
 from growspace_camera.calibration import PlaneFit
 from growspace_camera.errors import CameraError, EXPOSURE
@@ -282,8 +281,8 @@ def plant_mask(bgr: np.ndarray, params: SegmentParams, ground_m: float = 0.03) -
     min_px = params.min_area_m2 / params.pixel_m ** 2
     pale = max(PALE * params.min_greenness, centre + NOISE_SIGMAS * noise)
     if pale < low:
-        _bridge(mask, exg, pale, threshold, min_px, int(np.ceil(ground_m / params.pixel_m)),
-                MAX_GAP_M / params.pixel_m)
+        _bridge(mask, exg, pale, min_px, int(np.ceil(ground_m / params.pixel_m)),
+                int(round(MAX_GAP_M / params.pixel_m)))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] < min_px) + 1
     specks = int(stats[small, cv2.CC_STAT_AREA].sum())
@@ -366,19 +365,20 @@ def _hysteresis(exg: np.ndarray, low: float, high: float,
     return strong[labels]
 
 
-def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, threshold: float, min_px: float,
-            ground_px: int, max_gap_px: float) -> None:
+def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, ground_px: int,
+            max_gap_px: int) -> None:
     """Join each piece of ``mask`` that floats (reaches no closer than ``ground_px`` rows to
-    the soil line) to a piece that may stand on it, along the cheapest path through pixels
-    of ``exg`` above ``pale`` (a step costs ``threshold`` / ExG: the greenest way), when that
-    path crosses at most ``max_gap_px`` pixels outside the mask. In place (uint8 0/1).
+    the soil line) to a piece that may stand on it, through at most ``max_gap_px`` pixels
+    outside the mask whose ``exg`` is above ``pale``, along the greenest of the shortest such
+    ways. In place (uint8 0/1).
 
     A thin internode or petiole, blurred, can be paler than the threshold for a pixel or two,
     and the shoot above it is then a piece of its own that no stem base explains (a real
     leafy plant lost its top 15 cm that way). A longer pale stretch is left alone: the
     unlit lines a banded lamp leaves come in pieces along a line, and joined up they made a
     stem. Two pieces that may each stand on the soil line are two plants' business (the plant
-    count), never joined here; specks (under ``min_px``) are not joined either.
+    count), never joined here; specks (under ``min_px``) are not joined either. A piece
+    joined is a foothold for the next round, so a chain of pieces is joined piece by piece.
     """
     count, pieces, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if count <= 2:
@@ -388,31 +388,36 @@ def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, threshold: float, mi
     big = stats[:, cv2.CC_STAT_AREA] >= min_px
     grounded, floating = low & big, ~low & big
     grounded[0] = floating[0] = False
-    regions, region, boxes, _ = cv2.connectedComponentsWithStats(
-        ((exg > pale) | (mask > 0)).view(np.uint8), connectivity=8)
-    on = mask > 0
-    held = np.unique(np.column_stack((region[on], pieces[on])), axis=0)  # (region, piece)
-    # Regions holding a floating piece and a grounded one: only there is a bridge to find.
-    has_floating = np.zeros(regions, bool)
-    has_floating[held[floating[held[:, 1]], 0]] = True
-    has_grounded = np.zeros(regions, bool)
-    has_grounded[held[grounded[held[:, 1]], 0]] = True
-    for r in np.flatnonzero(has_floating & has_grounded):
-        x, y, w, h = boxes[r, :4]
-        box = (slice(y, y + h), slice(x, x + w))
-        inside, piece = region[box] == r, pieces[box]
-        # Through the mask at almost no cost; impassable (-1) outside the region.
-        cost = threshold / np.maximum(exg[box], 1e-6)
-        steps = np.where(inside, np.where(mask[box] == 0, cost, 1e-3), -1.0)
-        paths = MCP_Geometric(steps)
-        total, _ = paths.find_costs(np.argwhere(inside & grounded[piece]))
-        for q in np.unique(piece[inside & floating[piece]]):
-            own = inside & (piece == q)
-            cells = np.argwhere(own)
-            path = paths.traceback(tuple(cells[np.argmin(total[own])]))
-            rows, cols = (np.array(path) + (y, x)).T
-            if np.count_nonzero(mask[rows, cols] == 0) <= max_gap_px:
-                mask[rows, cols] = 1
+    pale_gap = (exg > pale) & (mask == 0)
+    far = max_gap_px + 2  # (a step count no bridge reaches)
+    while floating.any() and grounded.any():
+        # Steps from the grounded pieces (8-connected) through pale gap pixels and floating
+        # pieces: a floating pixel at step s is s - 1 gap pixels away.
+        steps = np.full(mask.shape, far, np.int16)
+        reached = grounded[pieces]
+        steps[reached] = 0
+        open_ = pale_gap | floating[pieces]
+        for step in range(1, far):
+            grown = cv2.dilate(reached.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+            grown &= open_ & ~reached
+            steps[grown] = step
+            reached |= grown
+        touched = np.unique(pieces[(steps < far) & floating[pieces]])
+        if touched.size == 0:
+            return
+        for q in touched:
+            own = np.where(pieces == q, steps, far)
+            row, col = np.unravel_index(np.argmin(own), own.shape)
+            for step in range(int(own[row, col]) - 1, 0, -1):  # back to the grounded piece
+                r0, c0 = max(row - 1, 0), max(col - 1, 0)
+                near = np.where(steps[r0:row + 2, c0:col + 2] == step,
+                                exg[r0:row + 2, c0:col + 2], -np.inf)
+                dr, dc = np.unravel_index(np.argmax(near), near.shape)
+                row, col = r0 + dr, c0 + dc
+                mask[row, col] = 1
+                pale_gap[row, col] = False
+        grounded[touched] = True
+        floating[touched] = False
 
 
 def _noise(index: np.ndarray, centre: float) -> float:
