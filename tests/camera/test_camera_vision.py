@@ -247,6 +247,15 @@ def test_a_shoot_cut_off_by_a_pale_stretch_is_joined_back_when_the_stretch_is_sh
     assert seg.mask[top - 30:top].any() and seg.mask[51:].any()
 
 
+def test_a_chain_of_pieces_cut_by_short_pale_stretches_is_joined_piece_by_piece():
+    # stem (rows 51-99), pale, a piece (rows 25-45), pale, the shoot's top (rows 5-19): the
+    # top is farther than MAX_GAP_M from the stem, but one gap from the joined middle piece.
+    photo = _stem_photo([(50, 51, 99), (50, 25, 45), (50, 5, 19)],
+                        [(slice(46, 51), slice(49, 52)), (slice(20, 25), slice(49, 52))])
+    mask = plant_mask(photo, SegmentParams()).mask
+    assert _pieces(mask) == 1 and mask[5:20].any()
+
+
 def test_two_stems_standing_on_the_soil_line_are_never_joined_by_a_pale_stretch():
     # Two stems from the floor whose tops a short pale stretch joins: two plants' business
     # (the plant count), not a gap in one plant.
