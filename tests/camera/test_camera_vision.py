@@ -22,7 +22,7 @@ from growspace_camera.markers import Detection, MarkerDetector, MarkerLayout, to
 from growspace_camera.measure import Target
 from growspace_camera.oracle_view import candidate_points, oracle_chamber, plant_view
 from growspace_camera.pipeline import overlay, Pipeline
-from growspace_camera.segment import _hysteresis, exposure, plant_mask, SegmentParams
+from growspace_camera.segment import _bridge, _hysteresis, exposure, plant_mask, SegmentParams
 from growspace_camera.sheet import sheet_pages
 from growspace_camera.twin import look_at_plane, PhotoTwin, TwinJitter, Variation
 from growspace_sim.core.config import SimConfig
@@ -256,11 +256,34 @@ def test_a_chain_of_pieces_cut_by_short_pale_stretches_is_joined_piece_by_piece(
     assert _pieces(mask) == 1 and mask[5:20].any()
 
 
-def test_two_stems_standing_on_the_soil_line_are_never_joined_by_a_pale_stretch():
-    # Two stems from the floor whose tops a short pale stretch joins: two plants' business
-    # (the plant count), not a gap in one plant.
-    photo = _stem_photo([(40, 40, 99), (48, 40, 99)], [(slice(40, 43), slice(41, 47))])
-    assert _pieces(plant_mask(photo, SegmentParams()).mask) == 2
+def _grid(rows: int, cols: int, mask: list[tuple], pale: list[tuple]) -> tuple[np.ndarray, ...]:
+    """A mask (uint8) and an ExG image (1 on ``pale`` pixels, 0 elsewhere) for ``_bridge``."""
+    m, exg = np.zeros((rows, cols), np.uint8), np.zeros((rows, cols), np.float32)
+    for where in mask:
+        m[where] = 1
+    for where in pale:
+        exg[where] = 1.0
+    return m, exg
+
+
+def test_a_join_that_would_connect_two_stems_standing_on_the_soil_line_is_undone():
+    # Two stems (grounded: they reach the bottom 3 rows), a floating bar a pale pixel above
+    # the left one and two above the right one, a shoot a pale pixel above the bar's right
+    # end. The shoot's shortest way runs through the bar to the right stem, the bar's own to
+    # the left one: joined both ways, the two plants would be one.
+    m, exg = _grid(20, 20, [(slice(9, None), 2), (slice(10, None), 17), (7, slice(2, 18)),
+                            (slice(1, 6), 17)], [(8, 2), (slice(8, 10), 17), (6, 17)])
+    _bridge(m, exg, 0.5, 3, 3, 4)
+    labels = cv2.connectedComponents(m, connectivity=8)[1]
+    assert labels[19, 2] != labels[19, 17]  # the stems stay apart
+    assert labels[1, 17] == labels[7, 10]  # the shoot is joined to the bar
+    assert labels[7, 10] in (labels[19, 2], labels[19, 17])  # and the bar to one stem
+    # A shoot whose only way in touches both stems (one pale pixel above the gap between
+    # them) stays apart: which plant it belongs to, the photo does not say.
+    m, exg = _grid(20, 12, [(slice(10, None), 3), (slice(10, None), 5), (slice(2, 8), 4)],
+                   [(slice(8, 10), 4)])
+    _bridge(m, exg, 0.5, 3, 3, 4)
+    assert _pieces(m) == 3
 
 
 def test_hysteresis_is_scikit_images():

@@ -367,27 +367,33 @@ def _hysteresis(exg: np.ndarray, low: float, high: float,
 
 def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, ground_px: int,
             max_gap_px: int) -> None:
-    """Join each piece of ``mask`` that floats (reaches no closer than ``ground_px`` rows to
-    the soil line) to a piece that may stand on it, through at most ``max_gap_px`` pixels
-    outside the mask whose ``exg`` is above ``pale``, along the greenest of the shortest such
-    ways. In place (uint8 0/1).
+    """Join each piece of ``mask`` that floats (has no pixel in the bottom ``ground_px`` rows,
+    by the soil line) to a piece that may stand on it, through at most ``max_gap_px`` pixels
+    outside the mask whose ``exg`` is above ``pale``: a shortest such way, back from the
+    floating piece by the greenest pixel of each step. In place (uint8 0/1).
 
     A thin internode or petiole, blurred, can be paler than the threshold for a pixel or two,
     and the shoot above it is then a piece of its own that no stem base explains (a real
     leafy plant lost its top 15 cm that way). A longer pale stretch is left alone: the
     unlit lines a banded lamp leaves come in pieces along a line, and joined up they made a
     stem. Two pieces that may each stand on the soil line are two plants' business (the plant
-    count), never joined here; specks (under ``min_px``) are not joined either. A piece
-    joined is a foothold for the next round, so a chain of pieces is joined piece by piece.
+    count): a join that would connect two of them, directly or through other pieces, is
+    undone. Specks (under ``min_px``) are not joined. A piece joined is a foothold for the
+    next round, so a chain of pieces is joined piece by piece.
     """
     count, pieces, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if count <= 2:
+    if count <= 2 or ground_px <= 0:
         return
     low = np.zeros(count, bool)
     low[pieces[-ground_px:]] = True
     big = stats[:, cv2.CC_STAT_AREA] >= min_px
     grounded, floating = low & big, ~low & big
     grounded[0] = floating[0] = False
+    # A pixel of each grounded piece: after a join they must still lie in as many pieces.
+    stands = np.flatnonzero(grounded)
+    pixel_of = np.zeros(count, np.intp)
+    pixel_of[pieces.ravel()] = np.arange(pieces.size)  # (any of the piece's pixels will do)
+    rows_of, cols_of = np.unravel_index(pixel_of[stands], pieces.shape)
     pale_gap = (exg > pale) & (mask == 0)
     far = max_gap_px + 2  # (a step count no bridge reaches)
     while floating.any() and grounded.any():
@@ -408,15 +414,24 @@ def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, groun
         for q in touched:
             own = np.where(pieces == q, steps, far)
             row, col = np.unravel_index(np.argmin(own), own.shape)
+            path = []
             for step in range(int(own[row, col]) - 1, 0, -1):  # back to the grounded piece
                 r0, c0 = max(row - 1, 0), max(col - 1, 0)
                 near = np.where(steps[r0:row + 2, c0:col + 2] == step,
                                 exg[r0:row + 2, c0:col + 2], -np.inf)
                 dr, dc = np.unravel_index(np.argmax(near), near.shape)
                 row, col = r0 + dr, c0 + dc
-                mask[row, col] = 1
-                pale_gap[row, col] = False
-        grounded[touched] = True
+                path.append((row, col))
+            rows, cols = np.array(path, np.intp).reshape(-1, 2).T
+            new = mask[rows, cols] == 0
+            mask[rows[new], cols[new]] = 1
+            labels = cv2.connectedComponents(mask, connectivity=8)[1]
+            if np.unique(labels[rows_of, cols_of]).size < stands.size:
+                mask[rows[new], cols[new]] = 0  # it would join two grounded pieces
+                floating[q] = False
+                continue
+            pale_gap[rows, cols] = False
+            grounded[q], floating[q] = True, False
         floating[touched] = False
 
 
