@@ -367,30 +367,22 @@ def _hysteresis(exg: np.ndarray, low: float, high: float,
 
 def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, ground_px: int,
             max_gap_px: int) -> None:
-    """Join each piece of ``mask`` that floats (has no pixel in the bottom ``ground_px`` rows,
-    by the soil line) to a piece that may stand on it, through at most ``max_gap_px`` pixels
-    outside the mask whose ``exg`` is above ``pale``: a shortest such way, back from the
-    floating piece by the greenest pixel of each step. In place (uint8 0/1).
-
-    A thin internode or petiole, blurred, can be paler than the threshold for a pixel or two,
-    and the shoot above it is then a piece of its own that no stem base explains (a real
-    leafy plant lost its top 15 cm that way). A longer pale stretch is left alone: the
-    unlit lines a banded lamp leaves come in pieces along a line, and joined up they made a
-    stem. Two pieces that may each stand on the soil line are two plants' business (the plant
-    count): a join that would connect two of them, directly or through other pieces, is
-    undone. Specks (under ``min_px``) are not joined. A piece joined is a foothold for the
-    next round, so a chain of pieces is joined piece by piece.
+    """Join each piece of ``mask`` with no pixel in its bottom ``ground_px`` rows to one that
+    may stand on the soil line, by a shortest way through at most ``max_gap_px`` pixels of
+    ``exg`` above ``pale`` outside the mask (back by the greenest pixel of each step); a
+    joined piece is a foothold for the next round. In place (uint8 0/1). A blurred internode
+    can be paler than the threshold for a pixel or two (a real plant lost its top 15 cm so);
+    a longer gap is left alone (a banded lamp's unlit line comes in pieces). A join that would
+    connect two grounded pieces (two plants' business) is undone; specks are not joined.
     """
     count, pieces, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if count <= 2 or ground_px <= 0:
         return
-    low = np.zeros(count, bool)
-    low[pieces[-ground_px:]] = True
+    low = np.isin(np.arange(count), pieces[-ground_px:])
     big = stats[:, cv2.CC_STAT_AREA] >= min_px
     grounded, floating = low & big, ~low & big
     grounded[0] = floating[0] = False
-    # A pixel of each grounded piece: after a join they must still lie in as many pieces.
-    stands = np.flatnonzero(grounded)
+    stands = np.flatnonzero(grounded)  # after a join, still in as many pieces
     pixel_of = np.zeros(count, np.intp)
     pixel_of[pieces.ravel()] = np.arange(pieces.size)  # (any of the piece's pixels will do)
     rows_of, cols_of = np.unravel_index(pixel_of[stands], pieces.shape)
