@@ -382,10 +382,7 @@ def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, groun
     big = stats[:, cv2.CC_STAT_AREA] >= min_px
     grounded, floating = low & big, ~low & big
     grounded[0] = floating[0] = False
-    stands = np.flatnonzero(grounded)  # after a join, still in as many pieces
-    pixel_of = np.zeros(count, np.intp)
-    pixel_of[pieces.ravel()] = np.arange(pieces.size)  # (any of the piece's pixels will do)
-    rows_of, cols_of = np.unravel_index(pixel_of[stands], pieces.shape)
+    standing, stands = grounded[pieces], np.count_nonzero(grounded)  # never fewer pieces
     pale_gap = (exg > pale) & (mask == 0)
     far = max_gap_px + 2  # (a step count no bridge reaches)
     while floating.any() and grounded.any():
@@ -418,7 +415,7 @@ def _bridge(mask: np.ndarray, exg: np.ndarray, pale: float, min_px: float, groun
             new = mask[rows, cols] == 0
             mask[rows[new], cols[new]] = 1
             labels = cv2.connectedComponents(mask, connectivity=8)[1]
-            if np.unique(labels[rows_of, cols_of]).size < stands.size:
+            if np.unique(labels[standing]).size < stands:
                 mask[rows[new], cols[new]] = 0  # it would join two grounded pieces
                 floating[q] = False
                 continue
