@@ -8,7 +8,8 @@
 gantry_node on the GRBL emulator with the photo twin, its faults and checks in
 ``soak_gantry.py``. ``--chamber sim``: sim_node, the faults below.
 
-Faults (chosen at random after a random number of steps, inside an episode or between two):
+Faults, each at a random step of the run, before the step is sent or after its answer (the
+runner stops itself there, ``PAUSE_ENV``: a fault never races a fast run to its end):
 - ``runner_kill``: SIGKILL to the runner (its sim_node stops by itself and finishes its file);
 - ``runner_term``: SIGTERM to the runner (it stops cleanly);
 - ``node_kill``: SIGKILL to the runner's sim_node (the runner sees it die and exits 1);
@@ -37,6 +38,8 @@ import subprocess
 import sys
 import time
 
+from growspace_sim.rig.rundir import PAUSE_ENV
+
 FAULTS = ('runner_kill', 'runner_term', 'node_kill', 'power_cut')
 EPISODE_LENGTH = 50
 
@@ -46,10 +49,10 @@ def _rig(*args: str) -> list[str]:
 
 
 def _steps(run: Path) -> int:
-    try:
-        return (run / 'journal.jsonl').read_bytes().count(b'"event":"step"')
-    except FileNotFoundError:
-        return 0
+    """Steps the run's journal holds (a torn last line is none)."""
+    from growspace_sim.rig.rundir import read_journal
+
+    return read_journal(run / 'journal.jsonl').steps_done
 
 
 def _children(pid: int) -> list[int]:
@@ -95,16 +98,20 @@ def _tear_journal(run: Path) -> None:
         stream.write(b'{"event":"step","episode":')
 
 
-def _wait_for_steps(proc: subprocess.Popen, run: Path, target: int, timeout_s: float) -> bool:
-    """Until the journal holds ``target`` steps (True) or the runner ended (False)."""
+def _wait_for_steps(proc: subprocess.Popen, run: Path, target: int, timeout_s: float) -> None:
+    """Until the journal holds ``target`` steps (a resume's first new one: it is timed)."""
     deadline = time.monotonic() + timeout_s
     while _steps(run) < target:
-        if proc.poll() is not None:
-            return False
-        if time.monotonic() > deadline:
-            raise TimeoutError(f'no progress to {target} steps in {timeout_s:g} s')
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f'soak: the resumed runner journaled no new step '
+                               f'(exit {proc.poll()}; {timeout_s:g} s)')
         time.sleep(0.02)  # polling a file another process writes
-    return True
+
+
+def _paused(proc: subprocess.Popen) -> bool:
+    """Until the runner stopped itself at its pause point (True) or ended (False)."""
+    info = os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED | os.WNOWAIT)
+    return info.si_code == os.CLD_STOPPED
 
 
 def count(run: Path, episodes: int, recording: Path | None = None) -> dict[str, int]:
@@ -174,52 +181,64 @@ def main(argv: list[str] | None = None) -> int:
         return soak_gantry.run(args, count)
     episodes = -(-args.steps // EPISODE_LENGTH)
     total = episodes * EPISODE_LENGTH
+    if args.faults > (total - 3) // 3:
+        parser.error(f'argument --faults: {args.faults} is too many for {total} steps; at most '
+                     f'{(total - 3) // 3} (a resume runs 2 steps before the next fault).')
     rng = random.Random(args.seed)
-    points = sorted(rng.sample(range(3, total - 2), args.faults)) if args.faults else []
+    # At least 2 steps apart: a resume's first new step is timed before its fault.
+    points = [point + 2 * i for i, point in enumerate(sorted(
+        rng.sample(range(3, total - 2 * args.faults), args.faults)))]
     run = args.out
     command = _rig('run', str(run), '--episodes', str(episodes), '--seed', str(args.seed),
                    '--record-max-bytes', '1000000', '--step-timeout', str(args.step_timeout))
     faults = resumes = 0
     resume_times: list[float] = []
+    stages = random.Random(args.seed + 1)  # its own stream: the faults' kinds stay those of seed
     log = open(os.devnull, 'w')  # noqa: SIM115 - the runner's lines are not the soak's
     while True:
         started = time.monotonic()
         before = _steps(run)
-        proc = subprocess.Popen(command, stdout=log, stderr=subprocess.PIPE,
+        # The runner stops itself at the next fault's point (PAUSE_ENV), after a resume's first
+        # new step (points are 2 apart; the guard is for a resume that adopted more).
+        point = max(points[0], before + 1 + bool(resumes)) if points else None
+        stage = stages.choice(('intent', 'step'))  # before the step is sent, or after its answer
+        env = dict(os.environ, **({PAUSE_ENV: f'{stage}:{point}'} if point else {}))
+        proc = subprocess.Popen(command, stdout=log, stderr=subprocess.PIPE, env=env,
                                 start_new_session=True)  # its own group: the "power" line
         if resumes:
             _wait_for_steps(proc, run, before + 1, args.step_timeout)
             resume_times.append(time.monotonic() - started)
-        # A point the resume already passed is taken at the next step.
-        point = max(points[0], _steps(run) + 1) if points else None
-        if point is not None and point >= total:
-            point = None  # the run ends first
-        if point is None or not _wait_for_steps(proc, run, point, args.step_timeout):
+        if not _paused(proc):
             _, err = proc.communicate(timeout=args.step_timeout)
-            if proc.returncode != 0:
-                print(f'soak: the runner failed (exit {proc.returncode}):\n{err.decode()}',
+            if proc.returncode != 0 or point is not None:
+                print(f'soak: the runner ended (exit {proc.returncode}) before its fault at '
+                      f'{stage} of step {point}:\n{err.decode()}' if point else
+                      f'soak: the runner failed (exit {proc.returncode}):\n{err.decode()}',
                       file=sys.stderr)
                 return 1
             break
         points.pop(0)
         fault = rng.choice(FAULTS)
-        if fault == 'runner_kill':
-            proc.send_signal(signal.SIGKILL)
-        elif fault == 'runner_term':
-            proc.send_signal(signal.SIGTERM)
+        if fault == 'power_cut':
+            os.killpg(proc.pid, signal.SIGKILL)
         elif fault == 'node_kill':
             node = _node_pid(proc.pid)
-            if node is not None:
-                os.kill(node, signal.SIGKILL)
+            if node is None:
+                print('soak: the runner has no sim_node to kill', file=sys.stderr)
+                return 1
+            os.kill(node, signal.SIGKILL)
         else:
-            os.killpg(proc.pid, signal.SIGKILL)
+            proc.send_signal(signal.SIGKILL if fault == 'runner_kill' else signal.SIGTERM)
+        if fault in ('runner_term', 'node_kill'):
+            proc.send_signal(signal.SIGCONT)  # a stopped runner acts once it runs again
         proc.communicate(timeout=args.step_timeout)
         if fault == 'power_cut':
             _cut_last_file(run, rng)
             _tear_journal(run)
         faults += 1
         resumes += 1
-        print(f'fault {faults}: {fault} at step {_steps(run)}', flush=True)
+        where = 'before step' if stage == 'intent' else 'after step'
+        print(f'fault {faults}: {fault} {where} {point}', flush=True)
         command = _rig('resume', str(run))
     totals = count(run, episodes)
     print(f'soak: steps={totals["steps"]} faults={faults} resumes={resumes} '

@@ -10,11 +10,11 @@ bit.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.recording import split_files
 from growspace_sim.replay import Bag, read_episodes, resimulate
-from growspace_sim.rig.rundir import read_journal
+from growspace_sim.rig.rundir import PAUSE_ENV, read_journal
 from growspace_sim.rig.runner import recorded_episodes, reset_id_of
 
 pytestmark = pytest.mark.slow  # each test runs sim_node and the runner as processes
@@ -45,14 +45,14 @@ def _steps_journaled(run: Path) -> int:
 
 
 def _start_and_kill(run: Path) -> None:
+    """Run, SIGKILLed once its 20th step is journaled (it stops itself there: PAUSE_ENV)."""
     proc = subprocess.Popen(_rig('run', str(run), '--episodes', str(EPISODES), '--seed',
                                  str(SEED), '--record-max-bytes', '200000'),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + TIMEOUT_S
-    while _steps_journaled(run) < KILL_AFTER_STEPS:
-        assert proc.poll() is None, proc.communicate()
-        assert time.monotonic() < deadline, 'the runner journaled too few steps'
-        time.sleep(0.05)  # polling the journal another process writes
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, **{PAUSE_ENV: f'step:{KILL_AFTER_STEPS}'}))
+    stopped = os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED | os.WNOWAIT)
+    assert stopped.si_code == os.CLD_STOPPED, proc.communicate()
+    assert _steps_journaled(run) == KILL_AFTER_STEPS
     proc.send_signal(signal.SIGKILL)
     proc.communicate(timeout=60)
 

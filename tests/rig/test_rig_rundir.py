@@ -5,7 +5,10 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import json
+import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -13,7 +16,7 @@ import pytest
 from growspace_sim.recording import RecordingError, repair, SplitRecorder, wait_until_free
 from growspace_sim.rig.cli import main as rig_main
 from growspace_sim.rig.rundir import (
-    format_progress, read_journal, RunDir, RunDirError, RunSettings)
+    format_progress, PAUSE_ENV, read_journal, RunDir, RunDirError, RunSettings)
 
 UTC = dt.UTC
 
@@ -88,6 +91,45 @@ def test_a_step_journaled_twice_is_counted_not_hidden(tmp_path):
     _journal_steps(run, 0, range(1, 3))
     _journal_steps(run, 0, range(2, 3))
     assert read_journal(run.journal_path).duplicated == 1
+
+
+_JOURNAL_TWO_EPISODES = """
+import sys
+from growspace_sim.rig.rundir import RunDir
+run = RunDir(sys.argv[1])
+for episode, steps in ((0, 50), (1, 5)):
+    run.append('reset', episode=episode, reset_id=11 + episode, seed=episode)
+    for step in range(1, steps + 1):
+        run.append('intent', episode=episode, step=step, step_id=step, action=1)
+        run.append('step', episode=episode, step=step, step_id=step, action=1, reward=0.5,
+                   terminated=False, truncated=step == 50)
+"""
+
+
+@pytest.mark.parametrize('stage', ['intent', 'step'])
+def test_the_fault_injection_pause_stops_the_process_at_that_line_of_the_runs_nth_step(
+        tmp_path, stage):
+    """PAUSE_ENV (the soak's and tests' hook): step 52 of the run is episode 2's step 2."""
+    RunDir.create(tmp_path / 'run', RunSettings(episodes=2))
+    proc = subprocess.Popen([sys.executable, '-c', _JOURNAL_TWO_EPISODES, str(tmp_path / 'run')],
+                            env=dict(os.environ, **{PAUSE_ENV: f'{stage}:52'}))
+    try:
+        stopped = os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED | os.WNOWAIT)
+        assert stopped.si_code == os.CLD_STOPPED
+        last = json.loads((tmp_path / 'run' / 'journal.jsonl').read_text().splitlines()[-1])
+        assert (last['event'], last['episode'], last['step']) == (stage, 1, 2)
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+@pytest.mark.parametrize('value', ['52', 'reset:3', 'step:0', 'step:x'])
+def test_a_bad_fault_injection_pause_is_refused_naming_it(tmp_path, monkeypatch, value):
+    RunDir.create(tmp_path / 'run', RunSettings())
+    monkeypatch.setenv(PAUSE_ENV, value)
+    with pytest.raises(RunDirError, match=rf"{PAUSE_ENV}='{value}' is not allowed; intent:N or "
+                                          r'step:N \(N >= 1\)'):
+        RunDir(tmp_path / 'run')
 
 
 def test_progress_line_says_step_k_of_n_next_step_time_and_eta(tmp_path):
