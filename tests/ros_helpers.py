@@ -29,7 +29,7 @@ from growspace_sim.node.rclpy_transport import RclpyTransport
 from growspace_sim.ros.interface import COMMAND_QOS
 from waiting import wait_until
 
-TIMEOUT_S = 20.0
+TIMEOUT_S = 60.0  # for events that surely come: generous for a loaded 2-core machine
 COMMANDS = QoSProfile(depth=100)
 OBSERVATIONS = QoSProfile(depth=10)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)  # chamber/config

@@ -67,18 +67,20 @@ def test_node_that_fails_to_start_reports_its_exit_code_and_stderr() -> None:
 
 @pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 def test_stalled_node_times_out_and_its_late_reply_is_ignored() -> None:
-    env = GrowSpaceBridgeEnv('control', 'easy', timeout_s=0.5)
+    env = GrowSpaceBridgeEnv('control', 'easy', timeout_s=60.0)
     local = GrowSpaceEnv('control', 'easy')
     try:
         env.reset(seed=3)
         local.reset(seed=3)
         os.kill(env.node.pid, signal.SIGSTOP)
+        env.timeout_s = 0.5  # short for the stalled step only: the others wait as in training
         try:
             with pytest.raises(BridgeTimeout, match=rf'{env.namespace}/step_result: no reply '
                                r'to light/command for step_id 1 .* timeout of 0.5 s') as caught:
                 env.step(1)
             assert isinstance(caught.value, TimeoutError) and caught.value.step_id == 1
         finally:
+            env.timeout_s = 60.0
             os.kill(env.node.pid, signal.SIGCONT)
         local.step(1)  # the node still runs step 1 when it wakes up
         bridged = env.step(2)
@@ -96,6 +98,12 @@ def test_attaching_to_no_node_times_out_naming_the_topic() -> None:
 def test_invalid_parameter_is_refused_before_any_node_starts() -> None:
     with pytest.raises(ValueError, match='light_width'):
         GrowSpaceBridgeEnv('control', 'easy', light_width=-1.0)
+
+
+def test_the_bridge_gives_a_closing_node_its_whole_bound_before_sigkill() -> None:
+    from growspace_gym_bridge.process import STOP_TIMEOUT_S
+
+    assert STOP_TIMEOUT_S > CLOSE_TIMEOUT_S  # its recording finished, or its own watchdog
 
 
 def test_close_stops_the_node_cleanly_and_is_idempotent() -> None:
@@ -187,12 +195,15 @@ def _async_bridged(**kwargs) -> gym.vector.AsyncVectorEnv:
 
 @pytest.mark.parametrize('fault', ['killed', 'stalled'])  # in the workers' own domains
 def test_async_vector_env_hands_the_parent_the_workers_error(fault: str) -> None:
-    vec = _async_bridged(timeout_s=1.0)
+    vec = _async_bridged(timeout_s=60.0)
     nodes, namespaces = list(vec.get_attr('node_pid')), vec.get_attr('namespace')
     workers = [p.pid for p in vec.processes]
     expected = NodeDied if fault == 'killed' else BridgeTimeout
     try:
         vec.reset(seed=[1, 2])
+        # Short for the stalled worker's step only (a killed node is noticed without one);
+        # the other worker's answer may be slow on a loaded machine.
+        vec.set_attr('timeout_s', [1.0 if fault == 'stalled' else 60.0, 60.0])
         os.kill(nodes[0], signal.SIGKILL if fault == 'killed' else signal.SIGSTOP)
         with pytest.raises(expected) as caught:
             vec.step(np.array([0, 1]))

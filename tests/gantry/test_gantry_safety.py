@@ -352,7 +352,7 @@ def test_refused_commands_do_not_feed_the_watchdog(tmp_path) -> None:
         place(rig, seed=2)
         rig.transport.inject('light/command', beam(0.3))
         assert rig.run_until(lambda: rig.controller.reached() and rig.grbl.spindle[0] == 'M3')
-        deadline = time.monotonic() + 1.5
+        deadline = time.monotonic() + 30.0  # the 0.4 s watchdog fires long before, unless fed
         while time.monotonic() < deadline and rig.grbl.spindle[0] == 'M3':
             rig.transport.inject('light/command', beam(0.8))  # beyond the travel: refused
             settle(rig, 0.1)

@@ -14,7 +14,7 @@ import time
 import pytest
 
 from conftest import child_env
-from ros_helpers import NodeProcess
+from ros_helpers import Client, NodeProcess
 from waiting import wait_until
 
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
@@ -49,15 +49,21 @@ def test_help_says_how_to_pass_ros_arguments(name: str) -> None:
 
 def test_a_view_beside_no_chamber_says_where_the_chambers_are() -> None:
     chamber = NodeProcess('-p', 'seed:=1', namespace=None)  # the default namespace
-    view = NodeProcess(namespace='/elsewhere', executable=executable('view_node'))
     said = 'view_node: no chamber in /elsewhere after 5 s; chambers are in /growspace'
+    view = None
     try:
+        client = Client('/growspace')  # the chamber on the graph first: the view looks once
+        try:
+            client.connect()
+        finally:
+            client.close()
+        view = NodeProcess(namespace='/elsewhere', executable=executable('view_node'))
         # presence.AFTER_S (5 s) after the view started, which a loaded machine delays.
         wait_until(lambda: said in view.output() or view.proc.poll() is not None, 90.0,
                    'the view says where the chambers are',
                    detail=lambda: view.output()[-2000:])
     finally:
-        code, out = view.stop(signal.SIGINT)
+        code, out = view.stop(signal.SIGINT) if view is not None else (None, '')
         chamber.stop()
     assert said in out and code == 0, out[-2000:]
 
@@ -72,10 +78,11 @@ def test_the_gantry_takes_the_simulators_params_file_without_crying_typo(tmp_pat
              str(ROOT / 'config' / 'growspace.yaml'), '-p', f'port:={grbl.port}'],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=child_env())
         try:
-            deadline = time.monotonic() + 20.0
+            deadline = time.monotonic() + 90.0  # its start-up on a loaded machine
             while '$$' not in grbl.lines and time.monotonic() < deadline \
                     and proc.poll() is None:
                 time.sleep(0.05)
+            assert '$$' in grbl.lines, proc.poll()  # up, its parameters read
         finally:
             proc.send_signal(signal.SIGINT)
             out = proc.communicate(timeout=20)[0]

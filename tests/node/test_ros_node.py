@@ -430,10 +430,12 @@ def test_realtime_mode_steps_at_rate_hz() -> None:
         elapsed = time.monotonic() - start
         steps = [r.step for r in client.results]
         assert 25 <= len(steps) / elapsed <= 70, (len(steps), elapsed)  # loose: CI is loaded
-        assert steps == list(range(steps[0], steps[0] + len(steps))), steps
         assert all(r.step_id == 0 for r in client.results)
         stamps = [r.header.stamp.sec * 10**9 + r.header.stamp.nanosec for r in client.results]
-        assert set(np.diff(stamps)) == {20_000_000}  # sim time: 1/rate_hz per step
+        # Sim time: 1/rate_hz per step. Results keep the last 10 for a slow reader, so a stall
+        # of this client may skip some: the stamps must then skip as many steps' time.
+        assert all(np.diff(steps) >= 1), steps
+        assert list(np.diff(stamps)) == [20_000_000 * k for k in np.diff(steps)]
     finally:
         client.close()
         code, output = process.stop()
@@ -663,7 +665,7 @@ def test_sigterm_during_start_up_exits_cleanly(delay_s: float) -> None:
 
 # Closing (issue 24 items 4, 5): run in child processes, signals and all, with faults injected.
 CLOSING_PROBE = """
-import json, os, signal, sys, threading
+import json, os, signal, sys
 from growspace_sim.node import main as node_main
 
 seen = {}
@@ -674,7 +676,12 @@ class Probe:
 
     def __init__(self, transport):
         self.transport, self.calls = transport, []
-        transport.create_timer(0.001, lambda: self.calls.append(transport.context.ok()))
+        transport.create_timer(0.001, self.tick)
+
+    def tick(self):
+        self.calls.append(self.transport.context.ok())
+        if len(self.calls) == 200:  # the signal comes while the timer runs, however slow
+            os.kill(os.getpid(), signal.SIGINT)
 
     def close(self):
         seen.update(up_at_close=self.transport.context.ok(), calls=len(self.calls),
@@ -682,7 +689,6 @@ class Probe:
 
 
 def run(argv, stop):
-    threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
     return node_main.run_node('probe', 'probe', argv, stop, Probe)
 
 
@@ -701,7 +707,7 @@ def destroy_node(self):  # a close that never returns
 
 
 rclpy.node.Node.destroy_node = destroy_node
-node_main.CLOSE_TIMEOUT_S = 2.0
+node_main.CLOSE_TIMEOUT_S = float(sys.argv[2])
 sys.exit(node_main.main(['--ros-args', '-r', '__ns:=' + sys.argv[1], '-p', 'mode:=realtime',
                          '-p', 'rate_hz:=100.0']))
 """
@@ -714,16 +720,17 @@ def test_a_signal_leaves_the_context_up_until_the_node_is_closed() -> None:
                          capture_output=True, text=True, timeout=TIMEOUT_S, env=child_env())
     assert out.returncode == 0, out.stderr[-2000:]
     seen = json.loads(out.stdout.strip().splitlines()[-1])
-    assert seen['code'] == 0 and seen['calls'] > 100  # the timer ran until the signal
+    assert seen['code'] == 0 and seen['calls'] >= 200  # the timer ran until the signal
     assert seen['up_at_close'] and seen['calls_after_shutdown'] == 0
     assert 'context is invalid' not in out.stderr and 'Traceback' not in out.stderr
 
 
-def _start_hanging_node(ns: str) -> tuple[subprocess.Popen, Any]:
+def _start_hanging_node(ns: str, close_timeout_s: float) -> tuple[subprocess.Popen, Any]:
     from conftest import child_env
 
     log = tempfile.TemporaryFile('w+')
-    proc = subprocess.Popen([sys.executable, '-c', HANGING_CLOSE, ns], stdout=log,
+    proc = subprocess.Popen([sys.executable, '-c', HANGING_CLOSE, ns, str(close_timeout_s)],
+                            stdout=log,
                             stderr=subprocess.STDOUT, text=True, env=child_env())
     deadline = time.monotonic() + TIMEOUT_S
     while 'realtime mode' not in _read(log):
@@ -740,7 +747,9 @@ def _read(log: Any) -> str:
 @pytest.mark.usefixtures('own_domain')  # it kills or stops a node
 @pytest.mark.parametrize('second', [None, signal.SIGTERM], ids=['watchdog', 'second-signal'])
 def test_closing_that_hangs_is_bounded(second: int | None) -> None:
-    proc, log = _start_hanging_node(f'{NAMESPACE}_hang_{second or 0}')
+    # With a second signal, a watchdog that cannot fire first: only the signal ends it.
+    proc, log = _start_hanging_node(f'{NAMESPACE}_hang_{second or 0}',
+                                    2.0 if second is None else 600.0)
     try:
         proc.send_signal(signal.SIGINT)
         start = time.monotonic()
@@ -750,7 +759,7 @@ def test_closing_that_hangs_is_bounded(second: int | None) -> None:
             wait_until(lambda: not catches(proc.pid, second), TIMEOUT_S,
                        'the node handles the first signal')
             proc.send_signal(second)
-        proc.wait(timeout=10.0)  # never, before: spinning in destroy_node, deaf to SIGTERM
+        proc.wait(timeout=TIMEOUT_S)  # never, before: spinning in destroy_node, deaf to SIGTERM
         took = time.monotonic() - start
         text = _read(log)
     finally:
@@ -759,7 +768,7 @@ def test_closing_that_hangs_is_bounded(second: int | None) -> None:
             proc.wait()
         log.close()
     if second is None:  # the watchdog: every thread's stack, then exit 1
-        assert proc.returncode == 1 and 1.5 < took < 6.0, (proc.returncode, took, text[-3000:])
+        assert proc.returncode == 1 and took > 1.5, (proc.returncode, took, text[-3000:])
         assert 'Timeout' in text and 'destroy_node' in text and 'run_node' in text, text[-3000:]
     else:  # the second signal's default action, at once
-        assert proc.returncode == -second and took < 3.0, (proc.returncode, took)
+        assert proc.returncode == -second, (proc.returncode, took)

@@ -9,11 +9,14 @@ only if the replay sends the episode's reset first.
 from __future__ import annotations
 
 from pathlib import Path
+import re
 import signal
+import time
 
 import pytest
 
 from growspace_sim.replay import Bag, main, read_episodes
+from growspace_sim.replay.play import _wait_until
 from ros_helpers import NodeProcess
 
 # Most tests here take seconds (processes, ROS graphs, Ray): none in the quick tier.
@@ -81,8 +84,28 @@ def test_chosen_steps_start_where_the_recording_had_the_light(tmp_path, capsys):
     assert [s for what, s in order if what == 'command'] == [19, 20, 21]  # placement, steps
     expected, got = lights(BAG), lights(tmp_path / 'node.mcap')
     assert {k: got[k] for k in (0, 19, 20, 21)} == {k: expected[k] for k in (0, 19, 20, 21)}
-    # A long period is not silent: the step counter and when the next step goes.
-    assert 'step 1/2 (step_id 20): done' in err and 'next: step 2/2 (step_id 21) at ' in err
+    assert 'step 1/2 (step_id 20): done' in err and 'step 2/2 (step_id 21): done' in err
+
+
+def test_a_long_step_period_says_when_the_next_request_goes():
+    """Not silent: a wait of over a second is announced, then spun out (the transport's
+    callbacks run meanwhile); a shorter one is not."""
+    class Transport:
+        spins = 0
+
+        def spin_once(self, timeout_s: float) -> None:
+            assert 0.0 <= timeout_s <= 0.1
+            self.spins += 1
+
+    said: list[str] = []
+    transport = Transport()
+    at = time.monotonic() + 1.3
+    _wait_until(transport, at, 'step 2/2 (step_id 21)', said.append)
+    assert time.monotonic() >= at and transport.spins >= 1
+    assert len(said) == 1 and re.fullmatch(
+        r'next: step 2/2 \(step_id 21\) at \d\d:\d\d:\d\d \(in 1 s\)', said[0]), said
+    _wait_until(transport, time.monotonic() + 0.5, 'step 3/3', said.append)
+    assert len(said) == 1
 
 
 @pytest.mark.parametrize('keep_going', [False, True])

@@ -18,7 +18,10 @@ from growspace_sim.ros import loopback
 
 import growspace_gym_bridge
 
-STOP_TIMEOUT_S = 5.0  # SIGTERM (and SIGCONT), then SIGKILL after this long [s]
+# SIGTERM (and SIGCONT), then SIGKILL after this long [s]: longer than sim_node's own bound on
+# its closing (node.main.CLOSE_TIMEOUT_S, 10 s), so a node finishing its recording on a loaded
+# machine is never cut short; a hung one exits by its own watchdog first, stacks and all.
+STOP_TIMEOUT_S = 12.0
 TAIL_BYTES = 8192  # how much of the node's stderr an error quotes at most
 PARENT_ENV = 'GROWSPACE_BRIDGE_PARENT'  # read by growspace_gym_bridge.launcher
 

@@ -154,12 +154,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f'pub: {reader} reads {topic} with a QoS that cannot match ours; it will not '
                   f'get this message', file=sys.stderr)
         if missing:
-            print(f'pub: node {", ".join(missing)} does not read {topic} after {args.wait} s '
+            print(f'pub: node {", ".join(missing)} does not read {topic} after {args.wait:g} s '
                   f'(its readers: {", ".join(readers) or "none"}); nothing published',
                   file=sys.stderr)
             return 1
         if not readers:
-            print(f'pub: no subscriber on {topic} after {args.wait} s; publishing anyway; '
+            print(f'pub: no subscriber on {topic} after {args.wait:g} s; publishing anyway; '
                   f'{where_chambers_are(transport)}', file=sys.stderr)
         matched = transport.matched_count(args.topic)
         if matched < len(readers):
