@@ -116,7 +116,13 @@ def compose(source: np.ndarray, entry: dict, layout: MarkerLayout) -> bytes:
     gain = float(p.get('gain', 1.0))
     if gain != 1.0:  # the exposure a rig's operator would set: the backdrop below white
         source = cv2.convertScaleAbs(source, alpha=gain)
-    photo = place(source, tuple(p['foot_px']), tuple(p['foot_m']), float(p['m_per_px']))
+    foot = tuple(p['foot_px'])
+    if 'top_cut' in p:  # the source's top edge cuts the plant there: backdrop above, not plant
+        c0, c1 = p['top_cut']
+        edge = source[:1].copy()
+        edge[0, c0:c1] = source[0, c0 - 1]
+        source, foot = np.vstack((edge, source)), (foot[0], foot[1] + 1)
+    photo = place(source, foot, tuple(p['foot_m']), float(p['m_per_px']))
     draw_markers(photo, layout)
     for quality in range(92, 40, -4):
         ok, jpeg = cv2.imencode('.jpg', photo, (cv2.IMWRITE_JPEG_QUALITY, quality))

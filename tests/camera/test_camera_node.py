@@ -316,6 +316,7 @@ def test_realtime_publishes_a_measured_photo_per_tick(tmp_path):
     ({'frame_id': 'a b'}, 'frame_id must be a frame name'),
     ({'max_loops': -1}, r'max_loops must be in \[0, 100000\], got -1'),
     ({'max_share_gap': 1.5}, r'max_share_gap must be in \[0.0, 1.0\], got 1.5'),
+    ({'max_float_m': -0.1}, r'max_float_m must be in \[0.0, 1.0\], got -0.1'),
 ])
 def test_bad_parameters_are_refused_with_the_name_value_and_range(params, match):
     with pytest.raises(ParamError, match=match):
@@ -329,9 +330,10 @@ def test_camera_nodes_defaults_are_the_pipelines():
     from growspace_camera.pipeline import PipelineParams
 
     assert CameraParams().pipeline(MarkerLayout()) == PipelineParams(MarkerLayout())
-    rig = CameraParams(max_loops=40, max_share_gap=0.4,
-                       max_unexplained=0.3).pipeline(MarkerLayout())
-    assert (rig.max_loops, rig.max_share_gap, rig.max_unexplained) == (40, 0.4, 0.3)
+    rig = CameraParams(max_loops=40, max_share_gap=0.4, max_unexplained=0.3,
+                       max_float_m=0.1).pipeline(MarkerLayout())
+    assert (rig.max_loops, rig.max_share_gap, rig.max_unexplained, rig.max_float_m) == \
+        (40, 0.4, 0.3, 0.1)
 
 
 def test_bad_marker_files_are_refused_naming_the_file_and_key(tmp_path):

@@ -38,6 +38,7 @@ TARGET = Target(0.42 + 0.6j)
 NEAR_PX = 1  # a point is in the mask when a pixel within this many grid pixels is (2.5 mm)
 TIP_M = 0.02  # a measured tip within this of each expected tip end
 FOOT_M = 0.015  # no tip this near the stem's foot on the soil line (the cut base)
+ACCEPT_WITHIN = 0.05  # a measured reward this near the truth (the bench's accept_precision)
 # Reasons that say the photo could not be read at all: a refused plant photo must name the
 # plant instead (no_plant, plants, or a quality gate on the measured tree).
 PHOTO_REASONS = (NO_PHOTO, EXPOSURE, MARKERS, FIT, BAD_INPUT)
@@ -56,6 +57,8 @@ class Expected:
         accepted: The photo must be measured (one plant); False: refused, naming the plant.
         tips: Named groups of shoot and leaf ends: a measured tip within ``TIP_M`` of each.
         foot: Where the stem meets the soil line: no tip within ``FOOT_M`` of it.
+        reward: The challenge's reward read off the photo by hand (``TARGET``), where it is
+            clear: a measured photo must give it within ``ACCEPT_WITHIN``, or be refused.
     """
 
     plant: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
@@ -63,6 +66,7 @@ class Expected:
     accepted: bool = True
     tips: dict[str, tuple[tuple[float, float], ...]] = field(default_factory=dict)
     foot: tuple[float, float] | None = None
+    reward: float | None = None
 
 
 EXPECTED = {
@@ -130,6 +134,22 @@ EXPECTED = {
                                      (0.489, 0.139), (0.331, 0.080), (0.336, 0.150)),
               'pale leaf tails': ((0.338, 0.221), (0.500, 0.171), (0.542, 0.100))},
         foot=(0.42, 0.0)),
+    # A bolting plant, 0.70 m: a tall flowering stem and thin side racemes, dark grey-green
+    # above the rosette, with small yellow-green flower clusters; narrow leaves up the stem;
+    # yellowing leaves droop over the pot. Read on the photo at 4x with a 1 cm grid
+    # (2026-11-29). A side raceme passes 1.2 cm from the target (0.42, 0.60), inside its 2.5 cm
+    # disc: the reward is 1.
+    'bolting_with_yellow_leaves': Expected(
+        plant={'rosette and lower stem': ((0.40, 0.10), (0.40, 0.20), (0.399, 0.27)),
+               'yellowing leaves': ((0.50, 0.032), (0.328, 0.056)),
+               'dark stems above': ((0.394, 0.35), (0.393, 0.40), (0.388, 0.45),
+                                    (0.384, 0.60), (0.383, 0.65), (0.42, 0.612)),
+               'flower clusters': ((0.466, 0.552), (0.477, 0.618))},
+        not_plant={'backdrop': ((0.45, 0.45), (0.33, 0.42), (0.55, 0.55), (0.42, 0.66),
+                                (0.60, 0.30)),
+                   'cabinet posts': ((0.11, 0.40), (0.74, 0.40))},
+        tips={'raceme ends': ((0.484, 0.466), (0.477, 0.628), (0.466, 0.56))},
+        foot=(0.42, 0.0), reward=1.0),
     # Not side views of a plant on the soil line: the camera must refuse them.
     'top_view': Expected(accepted=False),
     'trays_top_view': Expected(accepted=False),
@@ -140,6 +160,14 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
     ('seedling_thin_leaves', 'tips', 'thin left leaf ends'):
         f'{ITEM2} and {ITEM3}: accepted (reward 0.073; {ITEM4}) with the ends of both '
         'thin left leaves lost (no tip within 6 cm of them)',
+    ('bolting_with_yellow_leaves', 'plant', 'dark stems above'):
+        f'{ITEM2}: dark grey-green stems on a white backdrop have no excess green (the mask '
+        'stops 0.35 m up the 0.70 m stem)',
+    ('bolting_with_yellow_leaves', 'outcome', ''):
+        f'{ITEM2}: refused, rightly for now (unexplained: its flower clusters, 0.24 m over '
+        "the mask's top, reach no stem base; accepted, its reward was 0.085 for 1)",
+    ('bolting_with_yellow_leaves', 'tips', 'raceme ends'): f'{ITEM2}: refused (as above)',
+    ('bolting_with_yellow_leaves', 'foot', ''): f'{ITEM2}: refused (as above)',
     ('leafy_dicot_dark_pot', 'tips', 'pale leaf tails'):
         f'{ITEM2}: the pale tails of three narrow leaves fall below the threshold (no tip '
         'within 2.4-3.6 cm of their ends)',
@@ -239,6 +267,14 @@ def test_a_plant_photo_is_measured_and_anything_else_refused_naming_the_plant(ph
         assert m.reward == 0.0 and m.state is None
 
 
+@pytest.mark.parametrize('photo', [pytest.param(p, marks=xfail(p, 'reward'))
+                                   for p, e in EXPECTED.items() if e.reward is not None])
+def test_a_measured_reward_is_the_one_read_off_the_photo_or_the_photo_is_refused(photo):
+    m, truth = measured(photo), EXPECTED[photo].reward
+    assert not m.ok or abs(m.reward - truth) <= ACCEPT_WITHIN, \
+        f'accepted with reward {m.reward:.3f}; read off the photo: {truth}'
+
+
 def _tips(m: Measurement) -> np.ndarray:
     assert m.ok, m.error
     return np.vstack((m.tree.nodes[m.tree.tips], m.tree.leaf_tips))  # shoots' and leaves'
@@ -251,7 +287,8 @@ def test_tips_are_at_shoot_and_leaf_ends(photo, group):
     assert not missed, f'no tip within {TIP_M} m of {missed}; tips {np.round(seen, 3)}'
 
 
-@pytest.mark.parametrize('photo', [p for p, e in EXPECTED.items() if e.accepted])
+@pytest.mark.parametrize('photo', [pytest.param(p, marks=xfail(p, 'foot'))
+                                   for p, e in EXPECTED.items() if e.accepted])
 def test_no_tip_at_the_stems_cut_base(photo):
     seen = _tips(measured(photo))
     at_foot = seen[np.hypot(*(seen - EXPECTED[photo].foot).T) < FOOT_M]

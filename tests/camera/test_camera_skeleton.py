@@ -16,7 +16,8 @@ import pytest
 from growspace_camera.errors import CameraError, NO_PLANT, PLANTS, UNEXPLAINED
 from growspace_camera.measure import measured_state, Target
 from growspace_camera.nodes import measure_tree, PlantTree
-from growspace_camera.pipeline import check_loops, check_shares, PipelineParams
+from growspace_camera.pipeline import (
+    check_floating, check_loops, check_shares, PipelineParams)
 from growspace_camera.segment import Grid
 from growspace_camera.skeleton import TreeParams
 from growspace_sim.core.config import SimConfig
@@ -254,6 +255,30 @@ def test_the_loops_of_a_mask_are_its_holes_and_a_net_of_them_is_refused():
                        r'\(max_loops = 1\)') as e:
         check_loops(tree, max_loops=1)
     assert e.value.code == UNEXPLAINED
+
+
+@pytest.mark.parametrize('piece, refused', [
+    ([(0.10, 0.18), (0.11, 0.19)], True),  # 1.2 cm wide, 5 cm over the stem's top
+    ([(0.10, 0.14), (0.11, 0.15)], False),  # 1 cm over it: a leaf the mask cut off, near
+    ([(0.19, 0.18), (0.19, 0.19)], False),  # beside, not over the plant (a cabinet's edge)
+])
+def test_plant_far_above_the_measured_plant_that_no_stem_reaches_is_refused(piece, refused):
+    """A flower cluster over a stem the mask lost (the real bolting photo's dark racemes):
+    the tree measured is the plant's lower part, its reward a confident wrong number."""
+    stem = mask_of([(0.1, 0.0), (0.1, 0.12)])
+    mask = stem | mask_of(piece)
+    tree = tree_of(mask)
+    assert tree.plants == 1 and tree.unexplained_px > 0
+    if not refused:
+        check_floating(mask, tree, GRID, max_float_m=0.03)
+        return
+    with pytest.raises(CameraError, match=r'plant 0\.05 m above the measured plants reaches '
+                       r'no stem base \(max_float_m = 0\.03\)') as e:
+        check_floating(mask, tree, GRID, max_float_m=0.03)
+    assert e.value.code == UNEXPLAINED
+    thin = stem | mask_of([(0.1, 0.17), (0.1, 0.19)], width_m=0.004)  # a line: an edge's
+    check_floating(thin, tree_of(thin), GRID, max_float_m=0.03)
+    check_floating(mask, tree, GRID, max_float_m=0.0)  # 0: off
 
 
 def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():

@@ -58,6 +58,13 @@ class PipelineParams:
     # every step: 209 of 28 episodes): of the 8 beyond 0.25, 5 had a reward off by more than
     # 0.05; of the 201 within it, 14 (the twin draws each plant's stems 0.85-1.2 times as wide).
     max_share_gap: float = 0.25
+    # How far over the measured plants' top a piece of plant that reaches no stem base may
+    # lie (``check_floating``): farther, it is plant whose stem the mask missed. The twin's
+    # development photos (2,304) have none; a real bolting plant's dark racemes, 0.24 m.
+    max_float_m: float = 0.05
+
+
+FLOAT_WIDTH_M = 0.01  # a piece this wide somewhere is plant, not an edge's line [m]
 
 
 @dataclass
@@ -209,6 +216,7 @@ class Pipeline:
         clock.lap('skeleton')
         check_explained(tree, c.plant_pixels, p.max_unexplained)
         check_loops(tree, p.max_loops)
+        check_floating(seg.mask, tree, grid, p.max_float_m)
         out.state = state = measured_state(tree, cfg, light, target, steps)
         check_shares(tree, p.max_share_gap)  # (once the plant count is the challenge's)
         reward, plant_rewards, success = score(state, cfg)
@@ -229,6 +237,42 @@ def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) 
                           f'{plant_pixels} mask pixels reach no stem base (max_unexplained = '
                           f'{max_unexplained:g}); a stem the mask missed (brown, woody, '
                           f'hidden) or green that is not plant')
+
+
+def check_floating(mask: np.ndarray, tree: PlantTree, grid: Grid, max_float_m: float) -> None:
+    """Raises CameraError ``UNEXPLAINED`` when, over the measured plants and more than
+    ``max_float_m`` above their top, a piece of plant that holds no measured node is at least
+    ``FLOAT_WIDTH_M`` wide somewhere (a leaf, a flower cluster; not the thin line a cabinet
+    edge or a lamp's beam edge leaves): plant whose stem the mask missed (dark, thin or woody),
+    so the measured trees are its lower part and a reward read from them a confident wrong
+    number."""
+    if not tree.unexplained_px or max_float_m <= 0:
+        return
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8),
+                                                               connectivity=8)
+    rows = np.clip((grid.shape[0] - tree.nodes[:, 1] / grid.pixel_m).astype(int), 0,
+                   grid.shape[0] - 1)
+    cols = np.clip((tree.nodes[:, 0] / grid.pixel_m).astype(int), 0, grid.shape[1] - 1)
+    measured = np.zeros(count, bool)
+    measured[labels[rows, cols]] = True
+    measured[0] = False
+    if not measured.any():
+        return
+    left, top, width, height = stats[1:, :4].T  # per piece, its bounding box [px]
+    reach = max_float_m / grid.pixel_m
+    x0, x1 = left[measured[1:]].min() - reach, (left + width)[measured[1:]].max() + reach
+    crown = top[measured[1:]].min()  # the measured plants' highest row
+    wide = np.zeros(count, bool)
+    wide[labels[cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
+                >= 0.5 * FLOAT_WIDTH_M / grid.pixel_m]] = True
+    above = crown - (top + height) > reach  # its lowest row that far above the crown
+    over = (left + width > x0) & (left < x1)
+    floating = ~measured[1:] & wide[1:] & above & over
+    if floating.any():
+        gap = (crown - (top + height)[floating].max()) * grid.pixel_m  # the nearest
+        raise CameraError(UNEXPLAINED, f'plant {gap:.2f} m above the measured plants reaches '
+                          f'no stem base (max_float_m = {max_float_m:g}): a stem the mask '
+                          f'missed below it (dark, thin or woody), or green that is not plant')
 
 
 def check_loops(tree: PlantTree, max_loops: int) -> None:

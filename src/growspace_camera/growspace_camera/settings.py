@@ -112,6 +112,10 @@ class CameraParams:
     max_share_gap: float = param(0.25, "largest gap between touching plants' shares of the "
                                  "skeleton and their stems' (radius cubed); more: the photo "
                                  'is refused (plants)', unit='fraction', bounds=Bounds(0.0, 1.0))
+    max_float_m: float = param(0.05, 'farthest over the measured plants a piece of plant that '
+                               'reaches no stem base may lie (a flower cluster over a stem the '
+                               'mask missed); farther: the photo is refused (unexplained)',
+                               unit='m', bounds=Bounds(0.0, 1.0), rule='0 = off')
     segmentation_scale: float = param(0.5, 'size of camera/segmentation relative to the photo',
                                       unit='1', bounds=Bounds(0.05, 1.0))
     frame_id: str = frame_param('chamber', 'frame of plant state and measurements')
@@ -129,7 +133,7 @@ class CameraParams:
         tree = TreeParams(**{f.name: getattr(self, f.name) for f in fields(TreeParams)})
         return PipelineParams(layout, segment, tree, self.max_fit_error_m,
                               self.max_unexplained, load_lens(self.lens) if self.lens else None,
-                              self.max_loops, self.max_share_gap)
+                              self.max_loops, self.max_share_gap, self.max_float_m)
 
 
 _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
@@ -138,7 +142,7 @@ _SEGMENT_NAMES = {'pixel_m': 'pixel_size_m'}
 PIPELINE_FIELDS = ('markers', 'lens',
                    *(_SEGMENT_NAMES.get(f.name, f.name) for f in fields(SegmentParams)),
                    *(f.name for f in fields(TreeParams)), 'max_fit_error_m',
-                   'max_unexplained', 'max_loops', 'max_share_gap')
+                   'max_unexplained', 'max_loops', 'max_share_gap', 'max_float_m')
 
 
 def pipeline_values(params: CameraParams) -> dict[str, Any]:
