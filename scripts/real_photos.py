@@ -119,6 +119,9 @@ def compose(source: np.ndarray, entry: dict, layout: MarkerLayout) -> bytes:
     foot = tuple(p['foot_px'])
     if 'top_cut' in p:  # the source's top edge cuts the plant there: backdrop above, not plant
         c0, c1 = p['top_cut']
+        if not 1 <= c0 < c1 <= source.shape[1]:
+            raise SystemExit(f'{entry["name"]}: top_cut {p["top_cut"]} is not allowed; '
+                             f'[c0, c1) with 1 <= c0 < c1 <= {source.shape[1]}')
         edge = source[:1].copy()
         edge[0, c0:c1] = source[0, c0 - 1]
         source, foot = np.vstack((edge, source)), (foot[0], foot[1] + 1)

@@ -9,7 +9,7 @@ gantry_node on the GRBL emulator with the photo twin, its faults and checks in
 ``soak_gantry.py``. ``--chamber sim``: sim_node, the faults below.
 
 Faults, each at a random step of the run, before the step is sent or after its answer (the
-runner stops itself there, ``PAUSE_ENV``: a fault never races a fast run to its end):
+runner stops itself there, ``rig.faults``: a fault never races a fast run to its end):
 - ``runner_kill``: SIGKILL to the runner (its sim_node stops by itself and finishes its file);
 - ``runner_term``: SIGTERM to the runner (it stops cleanly);
 - ``node_kill``: SIGKILL to the runner's sim_node (the runner sees it die and exits 1);
@@ -36,9 +36,10 @@ import random
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
-from growspace_sim.rig.rundir import PAUSE_ENV
+from growspace_sim.rig.faults import PAUSE_ENV
 
 FAULTS = ('runner_kill', 'runner_term', 'node_kill', 'power_cut')
 EPISODE_LENGTH = 50
@@ -108,10 +109,18 @@ def _wait_for_steps(proc: subprocess.Popen, run: Path, target: int, timeout_s: f
         time.sleep(0.02)  # polling a file another process writes
 
 
-def _paused(proc: subprocess.Popen) -> bool:
+def _paused(proc: subprocess.Popen, timeout_s: float) -> bool:
     """Until the runner stopped itself at its pause point (True) or ended (False)."""
-    info = os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED | os.WNOWAIT)
-    return info.si_code == os.CLD_STOPPED
+    deadline = time.monotonic() + timeout_s
+    while True:
+        info = os.waitid(os.P_PID, proc.pid,
+                         os.WSTOPPED | os.WEXITED | os.WNOWAIT | os.WNOHANG)
+        if info is not None:
+            return info.si_code == os.CLD_STOPPED
+        if time.monotonic() > deadline:
+            raise RuntimeError(f'soak: the runner neither reached its fault nor ended in '
+                               f'{timeout_s:g} s')
+        time.sleep(0.02)  # (waitid cannot wait with a deadline)
 
 
 def count(run: Path, episodes: int, recording: Path | None = None) -> dict[str, int]:
@@ -195,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     resume_times: list[float] = []
     stages = random.Random(args.seed + 1)  # its own stream: the faults' kinds stay those of seed
     log = open(os.devnull, 'w')  # noqa: SIM115 - the runner's lines are not the soak's
+    quiet = {k: v for k, v in os.environ.items() if k != PAUSE_ENV}
     while True:
         started = time.monotonic()
         before = _steps(run)
@@ -202,36 +212,45 @@ def main(argv: list[str] | None = None) -> int:
         # new step (points are 2 apart; the guard is for a resume that adopted more).
         point = max(points[0], before + 1 + bool(resumes)) if points else None
         stage = stages.choice(('intent', 'step'))  # before the step is sent, or after its answer
-        env = dict(os.environ, **({PAUSE_ENV: f'{stage}:{point}'} if point else {}))
-        proc = subprocess.Popen(command, stdout=log, stderr=subprocess.PIPE, env=env,
+        env = {**quiet, PAUSE_ENV: f'{stage}:{point}'} if point else quiet
+        errors = tempfile.TemporaryFile()  # noqa: SIM115 - read when the runner failed
+        proc = subprocess.Popen(command, stdout=log, stderr=errors, env=env,
                                 start_new_session=True)  # its own group: the "power" line
-        if resumes:
-            _wait_for_steps(proc, run, before + 1, args.step_timeout)
-            resume_times.append(time.monotonic() - started)
-        if not _paused(proc):
-            _, err = proc.communicate(timeout=args.step_timeout)
-            if proc.returncode != 0 or point is not None:
-                print(f'soak: the runner ended (exit {proc.returncode}) before its fault at '
-                      f'{stage} of step {point}:\n{err.decode()}' if point else
-                      f'soak: the runner failed (exit {proc.returncode}):\n{err.decode()}',
-                      file=sys.stderr)
-                return 1
-            break
-        points.pop(0)
-        fault = rng.choice(FAULTS)
-        if fault == 'power_cut':
-            os.killpg(proc.pid, signal.SIGKILL)
-        elif fault == 'node_kill':
-            node = _node_pid(proc.pid)
-            if node is None:
-                print('soak: the runner has no sim_node to kill', file=sys.stderr)
-                return 1
-            os.kill(node, signal.SIGKILL)
-        else:
-            proc.send_signal(signal.SIGKILL if fault == 'runner_kill' else signal.SIGTERM)
-        if fault in ('runner_term', 'node_kill'):
-            proc.send_signal(signal.SIGCONT)  # a stopped runner acts once it runs again
-        proc.communicate(timeout=args.step_timeout)
+        try:
+            if resumes:
+                _wait_for_steps(proc, run, before + 1, args.step_timeout)
+                resume_times.append(time.monotonic() - started)
+            if not _paused(proc, args.step_timeout * max(1, (point or total) - before)):
+                proc.wait(timeout=args.step_timeout)
+                if proc.returncode != 0 or point is not None:
+                    errors.seek(0)
+                    said = errors.read().decode(errors='replace')
+                    print(f'soak: the runner ended (exit {proc.returncode}) before its fault '
+                          f'at {stage} of step {point}:\n{said}' if point else
+                          f'soak: the runner failed (exit {proc.returncode}):\n{said}',
+                          file=sys.stderr)
+                    return 1
+                break
+            points.pop(0)
+            fault = rng.choice(FAULTS)
+            if fault == 'power_cut':
+                os.killpg(proc.pid, signal.SIGKILL)
+            elif fault == 'node_kill':
+                node = _node_pid(proc.pid)
+                if node is None:
+                    print('soak: the runner has no sim_node to kill', file=sys.stderr)
+                    return 1
+                os.kill(node, signal.SIGKILL)
+            else:
+                proc.send_signal(signal.SIGKILL if fault == 'runner_kill' else signal.SIGTERM)
+            if fault in ('runner_term', 'node_kill'):
+                proc.send_signal(signal.SIGCONT)  # a stopped runner acts once it runs again
+            proc.wait(timeout=args.step_timeout)
+        finally:
+            if proc.poll() is None:  # a failure above: never leave a runner stopped, or its node
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+            errors.close()
         if fault == 'power_cut':
             _cut_last_file(run, rng)
             _tear_journal(run)

@@ -148,7 +148,8 @@ ERRORS = [NodeDied('/gs_a', -9, ['last line', 'another'], '/gs_a/step_result (st
           NodeDied('/gs_b', None), BridgeTimeout('/gs_a/step_result', 0.5, 3, 7, 'no reply'),
           CommandRejected('/gs_a/light/command: step_id 4 refused: error: x = nan ...'),
           BridgeError('sim node /gs_a runs in realtime mode')]
-CLOSE_BOUND_S = 15.0  # close() of a vector env with one dead or stalled node [s]
+CLOSE_BOUND_S = 25.0  # close() of a vector env with one dead or stalled node [s]: the
+# bridge's STOP_TIMEOUT_S (12 s) and a margin for a loaded machine
 # A node or worker whose owner died is gone by then [s]: a node's own closing is bounded by
 # CLOSE_TIMEOUT_S, and noticing the death takes a parent poll or two.
 GONE_WITHIN_S = CLOSE_TIMEOUT_S + 5.0

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 import yaml
 
-from growspace_camera.errors import BAD_INPUT, EXPOSURE, FIT, MARKERS, NO_PHOTO
+from growspace_camera.errors import BAD_INPUT, EXPOSURE, FIT, MARKERS, NO_PHOTO, UNEXPLAINED
 from growspace_camera.measure import Target
 from growspace_camera.pipeline import Measurement, Pipeline
 from growspace_sim.core.config import SimConfig
@@ -273,6 +273,14 @@ def test_a_measured_reward_is_the_one_read_off_the_photo_or_the_photo_is_refused
     m, truth = measured(photo), EXPECTED[photo].reward
     assert not m.ok or abs(m.reward - truth) <= ACCEPT_WITHIN, \
         f'accepted with reward {m.reward:.3f}; read off the photo: {truth}'
+
+
+def test_plant_over_a_stem_the_mask_missed_refuses_the_photo():
+    """The bolting plant's flower clusters, over dark racemes the mask misses, reach no stem
+    base: measured, the tree is its lower half (reward 0.085 for 1); refused, it says why."""
+    m = measured('bolting_with_yellow_leaves')
+    assert not m.ok and m.error.code == UNEXPLAINED
+    assert 'm above the measured plants reaches no stem base (max_float_m = 0.05)' in str(m.error)
 
 
 def _tips(m: Measurement) -> np.ndarray:

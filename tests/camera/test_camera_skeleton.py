@@ -281,6 +281,41 @@ def test_plant_far_above_the_measured_plant_that_no_stem_reaches_is_refused(piec
     check_floating(mask, tree, GRID, max_float_m=0.0)  # 0: off
 
 
+def test_a_lines_width_and_a_neighbours_height_do_not_decide_the_floating_check():
+    """At the camera's 2.5 mm pixels: a line 3 pixels (7.5 mm) wide over the plant, even along
+    the chamber's top row, is an edge's line, not plant; and a cluster over a short plant is
+    measured against that plant's top, not against a taller neighbour's."""
+    grid = Grid(0.3, 0.3, 0.0025)
+
+    def px(x: float, z: float) -> tuple[int, int]:
+        return int(x / grid.pixel_m), int(grid.shape[0] - z / grid.pixel_m)
+
+    def stems(*tops: tuple[float, float]) -> np.ndarray:
+        mask = np.zeros(grid.shape, np.uint8)
+        for x, z in tops:
+            cv2.line(mask, px(x, 0.0), px(x, z), 1, 5)
+        return mask
+
+    def refused(mask: np.ndarray) -> bool:
+        tree = measure_tree(mask.astype(bool), grid, SPACING, SPACING, TreeParams())
+        try:
+            check_floating(mask.astype(bool), tree, grid, max_float_m=0.03)
+        except CameraError:
+            return True
+        return False
+
+    line = stems((0.15, 0.10))
+    column = px(0.15, 0)[0]
+    line[px(0, 0.26)[1]:px(0, 0.20)[1], column - 1:column + 2] = 1  # 3 pixels wide
+    assert not refused(line)
+    top_row = stems((0.15, 0.10))
+    top_row[0:3, px(0.10, 0)[0]:px(0.20, 0)[0]] = 1  # along the chamber's top edge
+    assert not refused(top_row)
+    pair = stems((0.08, 0.28), (0.22, 0.10))  # a tall plant and a short one
+    cv2.circle(pair, px(0.22, 0.18), 3, 1, -1)  # 1.75 cm across, 7 cm over the short one
+    assert refused(pair)
+
+
 def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():
     # Plant 0 is a root with nothing above it: scored, it would be no plant (reward 0).
     bare = PlantTree(nodes=np.array([[0.04, 0.0], [0.15, 0.0], [0.15, 0.05], [0.15, 0.1]]),

@@ -23,8 +23,10 @@ from growspace_sim.agents import OracleAgent, play_episodes
 from growspace_sim.envs.env import GrowSpaceEnv
 from growspace_sim.recording import split_files
 from growspace_sim.replay import Bag, read_episodes, resimulate
-from growspace_sim.rig.rundir import PAUSE_ENV, read_journal
+from growspace_sim.rig.faults import PAUSE_ENV
+from growspace_sim.rig.rundir import read_journal
 from growspace_sim.rig.runner import recorded_episodes, reset_id_of
+from waiting import wait_until
 
 pytestmark = pytest.mark.slow  # each test runs sim_node and the runner as processes
 
@@ -50,11 +52,15 @@ def _start_and_kill(run: Path) -> None:
                                  str(SEED), '--record-max-bytes', '200000'),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, **{PAUSE_ENV: f'step:{KILL_AFTER_STEPS}'}))
-    stopped = os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED | os.WNOWAIT)
-    assert stopped.si_code == os.CLD_STOPPED, proc.communicate()
-    assert _steps_journaled(run) == KILL_AFTER_STEPS
-    proc.send_signal(signal.SIGKILL)
-    proc.communicate(timeout=60)
+    try:
+        stopped = wait_until(lambda: os.waitid(os.P_PID, proc.pid, os.WSTOPPED | os.WEXITED
+                                               | os.WNOWAIT | os.WNOHANG), TIMEOUT_S,
+                             'the runner stops itself after its 20th step')
+        assert stopped.si_code == os.CLD_STOPPED, 'the runner ended before its 20th step'
+        assert _steps_journaled(run) == KILL_AFTER_STEPS
+    finally:
+        proc.send_signal(signal.SIGKILL)  # (stopped or not)
+        proc.communicate(timeout=60)
 
 
 def _resume(run: Path) -> str:

@@ -16,7 +16,8 @@ import pytest
 from growspace_sim.recording import RecordingError, repair, SplitRecorder, wait_until_free
 from growspace_sim.rig.cli import main as rig_main
 from growspace_sim.rig.rundir import (
-    format_progress, PAUSE_ENV, read_journal, RunDir, RunDirError, RunSettings)
+    format_progress, read_journal, RunDir, RunDirError, RunSettings)
+from growspace_sim.rig.faults import PAUSE_ENV
 
 UTC = dt.UTC
 
@@ -123,13 +124,20 @@ def test_the_fault_injection_pause_stops_the_process_at_that_line_of_the_runs_nt
         proc.wait()
 
 
-@pytest.mark.parametrize('value', ['52', 'reset:3', 'step:0', 'step:x'])
+@pytest.mark.parametrize('value', ['52', 'reset:3', 'step:0', 'step:x', 'step:\u00b2'])
 def test_a_bad_fault_injection_pause_is_refused_naming_it(tmp_path, monkeypatch, value):
-    RunDir.create(tmp_path / 'run', RunSettings())
+    """Before a run directory is made; an existing one still opens (status reads it), and
+    refuses its first journal line."""
+    RunDir.create(tmp_path / 'old', RunSettings())
     monkeypatch.setenv(PAUSE_ENV, value)
-    with pytest.raises(RunDirError, match=rf"{PAUSE_ENV}='{value}' is not allowed; intent:N or "
-                                          r'step:N \(N >= 1\)'):
-        RunDir(tmp_path / 'run')
+    refused = rf"{PAUSE_ENV}='{value}' is not allowed; intent:N or step:N \(N >= 1\)"
+    with pytest.raises(RunDirError, match=refused):
+        RunDir.create(tmp_path / 'new', RunSettings())
+    assert not (tmp_path / 'new').exists()
+    old = RunDir(tmp_path / 'old')
+    with pytest.raises(RunDirError, match=refused):
+        old.append('reset', episode=0, reset_id=11, seed=0)
+    assert not old.journal_path.exists()
 
 
 def test_progress_line_says_step_k_of_n_next_step_time_and_eta(tmp_path):

@@ -240,8 +240,8 @@ def check_explained(tree: PlantTree, plant_pixels: int, max_unexplained: float) 
 
 
 def check_floating(mask: np.ndarray, tree: PlantTree, grid: Grid, max_float_m: float) -> None:
-    """Raises CameraError ``UNEXPLAINED`` when, over the measured plants and more than
-    ``max_float_m`` above their top, a piece of plant that holds no measured node is at least
+    """Raises CameraError ``UNEXPLAINED`` when, over a measured plant and more than
+    ``max_float_m`` above its top, a piece of plant that holds no measured node is at least
     ``FLOAT_WIDTH_M`` wide somewhere (a leaf, a flower cluster; not the thin line a cabinet
     edge or a lamp's beam edge leaves): plant whose stem the mask missed (dark, thin or woody),
     so the measured trees are its lower part and a reward read from them a confident wrong
@@ -250,26 +250,32 @@ def check_floating(mask: np.ndarray, tree: PlantTree, grid: Grid, max_float_m: f
         return
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8),
                                                                connectivity=8)
-    rows = np.clip((grid.shape[0] - tree.nodes[:, 1] / grid.pixel_m).astype(int), 0,
-                   grid.shape[0] - 1)
-    cols = np.clip((tree.nodes[:, 0] / grid.pixel_m).astype(int), 0, grid.shape[1] - 1)
+    # The pieces holding measured nodes (a node may sit a pixel off its skeleton's mask).
+    at_nodes = np.zeros(mask.shape, np.uint8)
+    rows = (grid.shape[0] - tree.nodes[:, 1] / grid.pixel_m).astype(int)
+    cols = (tree.nodes[:, 0] / grid.pixel_m).astype(int)
+    at_nodes[np.clip(rows, 0, grid.shape[0] - 1), np.clip(cols, 0, grid.shape[1] - 1)] = 1
     measured = np.zeros(count, bool)
-    measured[labels[rows, cols]] = True
+    measured[labels[cv2.dilate(at_nodes, np.ones((3, 3), np.uint8)) > 0]] = True
     measured[0] = False
-    if not measured.any():
-        return
-    left, top, width, height = stats[1:, :4].T  # per piece, its bounding box [px]
-    reach = max_float_m / grid.pixel_m
-    x0, x1 = left[measured[1:]].min() - reach, (left + width)[measured[1:]].max() + reach
-    crown = top[measured[1:]].min()  # the measured plants' highest row
+    # Wide somewhere: what is left of it after an opening by a disc about FLOAT_WIDTH_M across
+    # (an odd number of pixels: a disc centred on its pixel).
+    across = 2 * int(round(0.5 * FLOAT_WIDTH_M / grid.pixel_m)) + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (across, across))
     wide = np.zeros(count, bool)
-    wide[labels[cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 5)
-                >= 0.5 * FLOAT_WIDTH_M / grid.pixel_m]] = True
-    above = crown - (top + height) > reach  # its lowest row that far above the crown
-    over = (left + width > x0) & (left < x1)
-    floating = ~measured[1:] & wide[1:] & above & over
-    if floating.any():
-        gap = (crown - (top + height)[floating].max()) * grid.pixel_m  # the nearest
+    wide[labels[cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_OPEN, disc,
+                                 borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0]] = True
+    wide[0] = False  # (the backdrop)
+    left, top, width, height = stats[:, :4].T  # per piece, its bounding box [px]
+    reach = max_float_m / grid.pixel_m
+    gaps = []
+    for piece in np.flatnonzero(wide & ~measured):
+        under = measured & (left - reach < left[piece] + width[piece]) & \
+            (left + width + reach > left[piece])  # measured plants it lies over
+        if under.any():
+            gaps.append(top[under].min() - (top[piece] + height[piece]))  # rows above their top
+    if gaps and max(gaps) > reach:
+        gap = min(g for g in gaps if g > reach) * grid.pixel_m  # the nearest such piece
         raise CameraError(UNEXPLAINED, f'plant {gap:.2f} m above the measured plants reaches '
                           f'no stem base (max_float_m = {max_float_m:g}): a stem the mask '
                           f'missed below it (dark, thin or woody), or green that is not plant')

@@ -31,21 +31,16 @@ import math
 import os
 from pathlib import Path
 import secrets
-import signal
 from typing import Any
 
 from growspace_sim.core.photoperiod import Photoperiod
+from growspace_sim.rig.faults import armed, stop_if_due
 
 RUN_FILE = 'run.json'
 JOURNAL_FILE = 'journal.jsonl'
 RECORDING_DIR = 'recording'
 CHAMBERS = ('sim', 'attach')
 POLICY_KINDS = ('oracle', 'random', 'replay', 'model')
-# Fault injection only (scripts/soak_rig.py, tests): ``intent:N`` or ``step:N`` makes the process
-# stop itself (SIGSTOP) once the journal line of the run's Nth step (counted over its episodes) at
-# that stage is on disk, so a harness injects its fault at a known point of a fast run instead
-# of racing it to its end. Unset in a real run.
-PAUSE_ENV = 'GROWSPACE_RIG_PAUSE_AT'
 
 
 class RunDirError(Exception):
@@ -313,7 +308,7 @@ class RunDir:
         self.state = read_journal(self.journal_path)
         if self.state.torn:
             self._cut_torn_line()
-        self._pause_at = _pause_point(os.environ.get(PAUSE_ENV, ''))
+        self._pause_at: tuple[str, int] | None | bool = False  # read at the first append
 
     @classmethod
     def create(cls, path: str | os.PathLike, settings: RunSettings) -> RunDir:
@@ -323,6 +318,7 @@ class RunDir:
             RunDirError: The directory exists (resume it instead) or cannot be created.
         """
         path = Path(path)
+        armed(error=RunDirError)  # a bad fault-injection setting: refused before anything
         try:
             path.mkdir(parents=True)  # refuses an existing directory atomically
         except FileExistsError:
@@ -353,8 +349,10 @@ class RunDir:
 
         Raises:
             RunDirError: It could not be written (a full disk): the runner must stop, since
-                acting without the journal would lose the step.
+                acting without the journal would lose the step; or a bad ``faults.PAUSE_ENV``.
         """
+        if self._pause_at is False:  # (before the line: a bad value writes nothing)
+            self._pause_at = armed(say=True, error=RunDirError)
         record = {'event': event, 't': utc_now(), **fields}
         if isinstance(record.get('reward'), float) and math.isnan(record['reward']):
             record['reward'] = None  # JSON has no NaN
@@ -372,8 +370,7 @@ class RunDir:
                               f'{e.strerror or e}') from e
         _apply(self.state, record)
         self.state.events += 1
-        if self._pause_at == (event, self.state.steps_done + (event == 'intent')):
-            os.kill(os.getpid(), signal.SIGSTOP)
+        stop_if_due(self._pause_at, event, self.state.steps_done)
 
     def _cut_torn_line(self) -> None:
         """Drop a last line cut short by a crash, so the next event starts on its own line."""
@@ -384,17 +381,6 @@ class RunDir:
             stream.flush()
             os.fsync(stream.fileno())
         self.state.torn = False
-
-
-def _pause_point(text: str) -> tuple[str, int] | None:
-    """``PAUSE_ENV``'s value as (stage, step); None when unset."""
-    if not text:
-        return None
-    stage, _, number = text.partition(':')
-    if stage not in ('intent', 'step') or not number.isdigit() or int(number) < 1:
-        raise RunDirError(f'{PAUSE_ENV}={text!r} is not allowed; intent:N or step:N (N >= 1), '
-                          f'or unset (it is for fault injection only).')
-    return stage, int(number)
 
 
 def write_atomically(path: Path, text: str) -> None:
