@@ -164,7 +164,7 @@ XFAIL = {  # (photo, test, group) -> why today's pipeline fails it (checked 2026
         f'{ITEM2}: dark grey-green stems on a white backdrop have no excess green (the mask '
         'stops 0.35 m up the 0.70 m stem)',
     ('bolting_with_yellow_leaves', 'outcome', ''):
-        f'{ITEM2}: refused, rightly for now (unexplained: its flower clusters, 0.24 m over '
+        f'{ITEM2}: refused, rightly for now (unexplained: its flower clusters, 0.26 m over '
         "the mask's top, reach no stem base; accepted, its reward was 0.085 for 1)",
     ('bolting_with_yellow_leaves', 'tips', 'raceme ends'): f'{ITEM2}: refused (as above)',
     ('bolting_with_yellow_leaves', 'foot', ''): f'{ITEM2}: refused (as above)',
