@@ -26,17 +26,20 @@ GRID = Grid(0.2, 0.2, 0.002)
 SPACING = 0.05
 
 
-def mask_of(*polylines: list[tuple[float, float]], width_m: float = 0.012) -> np.ndarray:
+def mask_of(*polylines: list[tuple[float, float]], width_m: float = 0.012,
+            grid: Grid = GRID) -> np.ndarray:
     """A mask with each polyline (x, z in m) drawn as a stem ``width_m`` wide, its last point
     the centre of a round end (as a twig's tip is round)."""
-    mask = np.zeros(GRID.shape, np.uint8)
+    mask = np.zeros(grid.shape, np.uint8)
+    height_m = grid.shape[0] * grid.pixel_m
     for line in polylines:
-        points = np.array([((x / GRID.pixel_m - 0.5) * 16, ((0.2 - z) / GRID.pixel_m - 0.5)
-                            * 16) for x, z in line], np.int32)
-        cv2.polylines(mask, [points], False, 1, int(round(width_m / GRID.pixel_m)),
+        points = np.array([((x / grid.pixel_m - 0.5) * 16,
+                            ((height_m - z) / grid.pixel_m - 0.5) * 16) for x, z in line],
+                          np.int32)
+        cv2.polylines(mask, [points], False, 1, int(round(width_m / grid.pixel_m)),
                       cv2.LINE_8, 4)
         cv2.circle(mask, tuple(int(v) for v in points[-1]),
-                   int(round(0.5 * width_m / GRID.pixel_m * 16)), 1, -1, cv2.LINE_8, 4)
+                   int(round(0.5 * width_m / grid.pixel_m * 16)), 1, -1, cv2.LINE_8, 4)
     return mask.astype(bool)
 
 
@@ -261,6 +264,7 @@ def test_the_loops_of_a_mask_are_its_holes_and_a_net_of_them_is_refused():
     ([(0.10, 0.18), (0.11, 0.19)], True),  # 1.2 cm wide, 5 cm over the stem's top
     ([(0.10, 0.14), (0.11, 0.15)], False),  # 1 cm over it: a leaf the mask cut off, near
     ([(0.19, 0.18), (0.19, 0.19)], False),  # beside, not over the plant (a cabinet's edge)
+    ([(0.01, 0.18), (0.01, 0.19)], False),  # beside it on the other side
 ])
 def test_plant_far_above_the_measured_plant_that_no_stem_reaches_is_refused(piece, refused):
     """A flower cluster over a stem the mask lost (the real bolting photo's dark racemes):
@@ -287,33 +291,27 @@ def test_a_lines_width_and_a_neighbours_height_do_not_decide_the_floating_check(
     measured against that plant's top, not against a taller neighbour's."""
     grid = Grid(0.3, 0.3, 0.0025)
 
-    def px(x: float, z: float) -> tuple[int, int]:
-        return int(x / grid.pixel_m), int(grid.shape[0] - z / grid.pixel_m)
-
     def stems(*tops: tuple[float, float]) -> np.ndarray:
-        mask = np.zeros(grid.shape, np.uint8)
-        for x, z in tops:
-            cv2.line(mask, px(x, 0.0), px(x, z), 1, 5)
-        return mask
+        return mask_of(*[[(x, 0.0), (x, z)] for x, z in tops], width_m=0.0125, grid=grid)
 
     def refused(mask: np.ndarray) -> bool:
-        tree = measure_tree(mask.astype(bool), grid, SPACING, SPACING, TreeParams())
+        tree = measure_tree(mask, grid, SPACING, SPACING, TreeParams())
         try:
-            check_floating(mask.astype(bool), tree, grid, max_float_m=0.03)
+            check_floating(mask, tree, grid, max_float_m=0.03)
         except CameraError:
             return True
         return False
 
+    column, first, last = int(0.15 / grid.pixel_m), grid.shape[0] - 104, grid.shape[0] - 80
     line = stems((0.15, 0.10))
-    column = px(0.15, 0)[0]
-    line[px(0, 0.26)[1]:px(0, 0.20)[1], column - 1:column + 2] = 1  # 3 pixels wide
+    line[first:last, column - 1:column + 2] = True  # 3 pixels wide, z 0.20-0.26 m
     assert not refused(line)
     top_row = stems((0.15, 0.10))
-    top_row[0:3, px(0.10, 0)[0]:px(0.20, 0)[0]] = 1  # along the chamber's top edge
+    top_row[0:3, 40:80] = True  # along the chamber's top edge, x 0.10-0.20 m
     assert not refused(top_row)
     pair = stems((0.08, 0.28), (0.22, 0.10))  # a tall plant and a short one
-    cv2.circle(pair, px(0.22, 0.18), 3, 1, -1)  # 1.75 cm across, 7 cm over the short one
-    assert refused(pair)
+    # 1.75 cm across, 7 cm over the short one and under the tall one's top
+    assert refused(pair | mask_of([(0.22, 0.18)], width_m=0.0175, grid=grid))
 
 
 def test_a_plant_measured_as_its_base_alone_is_refused_not_scored_zero():

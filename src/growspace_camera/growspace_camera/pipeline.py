@@ -268,14 +268,14 @@ def check_floating(mask: np.ndarray, tree: PlantTree, grid: Grid, max_float_m: f
     wide[0] = False  # (the backdrop)
     left, top, width, height = stats[:, :4].T  # per piece, its bounding box [px]
     reach = max_float_m / grid.pixel_m
-    gaps = []
+    gaps = []  # rows between a floating piece and the top of the plants it lies over
     for piece in np.flatnonzero(wide & ~measured):
         under = measured & (left - reach < left[piece] + width[piece]) & \
-            (left + width + reach > left[piece])  # measured plants it lies over
-        if under.any():
-            gaps.append(top[under].min() - (top[piece] + height[piece]))  # rows above their top
-    if gaps and max(gaps) > reach:
-        gap = min(g for g in gaps if g > reach) * grid.pixel_m  # the nearest such piece
+            (left + width + reach > left[piece])
+        if under.any() and (above := top[under].min() - (top[piece] + height[piece])) > reach:
+            gaps.append(above)
+    if gaps:
+        gap = min(gaps) * grid.pixel_m  # the nearest such piece
         raise CameraError(UNEXPLAINED, f'plant {gap:.2f} m above the measured plants reaches '
                           f'no stem base (max_float_m = {max_float_m:g}): a stem the mask '
                           f'missed below it (dark, thin or woody), or green that is not plant')

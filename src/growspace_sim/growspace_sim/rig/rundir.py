@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
+import functools
 import json
 import math
 import os
@@ -308,7 +309,6 @@ class RunDir:
         self.state = read_journal(self.journal_path)
         if self.state.torn:
             self._cut_torn_line()
-        self._pause_at: tuple[str, int] | None | bool = False  # read at the first append
 
     @classmethod
     def create(cls, path: str | os.PathLike, settings: RunSettings) -> RunDir:
@@ -351,8 +351,7 @@ class RunDir:
             RunDirError: It could not be written (a full disk): the runner must stop, since
                 acting without the journal would lose the step; or a bad ``faults.PAUSE_ENV``.
         """
-        if self._pause_at is False:  # (before the line: a bad value writes nothing)
-            self._pause_at = armed(say=True, error=RunDirError)
+        pause_at = self._pause_at  # (before the line: a bad value writes nothing)
         record = {'event': event, 't': utc_now(), **fields}
         if isinstance(record.get('reward'), float) and math.isnan(record['reward']):
             record['reward'] = None  # JSON has no NaN
@@ -370,7 +369,12 @@ class RunDir:
                               f'{e.strerror or e}') from e
         _apply(self.state, record)
         self.state.events += 1
-        stop_if_due(self._pause_at, event, self.state.steps_done)
+        stop_if_due(pause_at, event, self.state.steps_done)
+
+    @functools.cached_property
+    def _pause_at(self) -> tuple[str, int] | None:
+        """The fault-injection pause (``faults.PAUSE_ENV``), read at the first append."""
+        return armed(say=True, error=RunDirError)
 
     def _cut_torn_line(self) -> None:
         """Drop a last line cut short by a crash, so the next event starts on its own line."""
