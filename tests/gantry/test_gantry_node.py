@@ -46,7 +46,8 @@ class Rig:
     """An emulated controller, a gantry node on a fake transport, and helpers to drive them."""
 
     def __init__(self, tmp_path, settings=None, cal=None, emulator: dict | None = None,
-                 wall_clock=time.time, resume=None, recorder=None, **params: Any) -> None:
+                 clock=time.monotonic, wall_clock=time.time, resume=None, recorder=None,
+                 **params: Any) -> None:
         self.grbl = GrblEmulator({**RIG, **(settings or {})}, link_dir=tmp_path,
                                  **{'speedup': SPEEDUP, **(emulator or {})}).start()
         self.transport = FakeTransport('growspace_gantry')
@@ -57,7 +58,7 @@ class Rig:
                                          photo_light=params.get('photo_light', False))
         self.node = GantryNode(t, self.controller, SimConfig(), GantryParams(
             port=self.grbl.port, **{'seed': 7, **params}), recorder=recorder,
-            wall_clock=wall_clock, resume=resume)
+            clock=clock, wall_clock=wall_clock, resume=resume)
 
     def run_until(self, condition, timeout: float = 5.0) -> bool:
         deadline = time.monotonic() + timeout

@@ -344,21 +344,57 @@ def test_a_long_move_is_not_cut_by_the_watchdog(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_refused_commands_do_not_feed_the_watchdog(tmp_path) -> None:
-    rig = Rig(tmp_path, mode='realtime', watchdog_s=0.4, cal=load_cal(x={
+    # The node's clock stops once the lamp is lit and then goes on by hand, a tenth of the
+    # watchdog per refused command: a slow machine cannot leave a gap that trips it anyway.
+    clock = StoppableClock()
+    rig = Rig(tmp_path, mode='realtime', watchdog_s=0.4, clock=clock, cal=load_cal(x={
         'axis': 'X', 'mm_per_m': 1000.0, 'offset_mm': -845.0, 'direction': 1,
         'min_mm': -845.0, 'max_mm': -245.0}))
     try:
         rig.ready()
         place(rig, seed=2)
-        rig.transport.inject('light/command', beam(0.3))
-        assert rig.run_until(lambda: rig.controller.reached() and rig.grbl.spindle[0] == 'M3')
-        deadline = time.monotonic() + 30.0  # the 0.4 s watchdog fires long before, unless fed
-        while time.monotonic() < deadline and rig.grbl.spindle[0] == 'M3':
+        for _ in range(3):  # (until the clock stops before the watchdog trips by itself)
+            rig.transport.inject('light/command', beam(0.3))
+            assert rig.run_until(lambda: rig.controller.reached()
+                                 and rig.grbl.spindle[0] == 'M3')
+            clock.stop()
+            if not rig.node.safety.watchdog_tripped:
+                break
+            clock.go_on()
+        assert not rig.node.safety.watchdog_tripped
+        warnings, mark = len(rig.transport.warnings), len(rig.grbl.lines)
+        steps = 0  # of 0.04 s, a refused command each
+        while steps < 50 and rig.grbl.spindle[0] == 'M3':  # 5 watchdog periods at most
             rig.transport.inject('light/command', beam(0.8))  # beyond the travel: refused
-            settle(rig, 0.1)
-        assert rig.grbl.spindle[0] == 'M5'
+            clock.step(0.04)
+            steps += 1
+            rig.run_until(lambda: rig.grbl.spindle[0] == 'M5', timeout=0.05)
+        assert rig.node.safety.watchdog_tripped and rig.grbl.spindle[0] == 'M5'
+        assert steps <= 11, steps  # tripped on time (0.4 s after the move), as if none came
+        assert any('not sent to the machine' in w for w in rig.transport.warnings[warnings:])
+        assert moves_after(rig, mark) == []
     finally:
         rig.close()
+
+
+class StoppableClock:
+    """``time.monotonic`` until stopped; then it moves only when a test steps it."""
+
+    def __init__(self) -> None:
+        self.stopped_at: float | None = None
+
+    def __call__(self) -> float:
+        return time.monotonic() if self.stopped_at is None else self.stopped_at
+
+    def stop(self) -> None:
+        self.stopped_at = time.monotonic()
+
+    def step(self, seconds: float) -> None:
+        assert self.stopped_at is not None
+        self.stopped_at += seconds
+
+    def go_on(self) -> None:
+        self.stopped_at = None
 
 
 # --- 7. status says what is true -----------------------------------------------------------------
