@@ -67,7 +67,9 @@ def test_bridge_link_drives_the_gantry_then_sigterm_mid_move(grbl: GrblEmulator)
             assert reply.light.step_id == step_id
             assert grbl.state == 'Idle'
         assert grbl.spindle == ('M3', 1000.0)
-        # A long move, then SIGTERM before it ends.
+        # A long move, then SIGTERM before it ends: ten times slower than the steps (5-8 s),
+        # so that a loaded machine's delay in stopping cannot let it end first.
+        grbl.speedup = SPEEDUP / 10.0  # (the machine stands Idle: no block in motion)
         publish = transport.publisher(types.LIGHT_COMMAND, 'light/command', COMMAND_QOS)
         publish(types.new(types.LIGHT_COMMAND, step_id=7, mode=convert.MODE_BEAM, x=0.8,
                           width=0.2))  # not awaited
