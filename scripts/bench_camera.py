@@ -17,6 +17,10 @@ Fixed method (every draw seeded, so a run is repeatable):
    precision and recall, as in road and vessel centre-line extraction): both centre lines
    drawn at 1 cm pixels, a pixel matched when the other line passes within one pixel (1 cm,
    the tips' tolerance), IoU = PR / (P + R - PR); its exact 28 px IoU is reported beside.
+   A simulator tip inside another segment as the simulator draws it (its thickness: a bud on
+   its stem, a shoot ending on a branch in front of or behind it) is hidden: no photo from
+   the side shows its end. ``tips_hidden`` is their share, ``tips_1cm_in_view`` the recall
+   over the others (hidden tips are still counted in ``tips_1cm``).
    A photo the pipeline refuses counts as IoU 0, every tip missed and a reward of 0
    (refusals are listed too). For scale, the same IoU of the simulator's own plants redrawn
    by the camera's ``measured_state`` + ``Observer`` with every node moved by a seeded
@@ -58,7 +62,7 @@ speed is measured on one pinned core either way.
 Ends with two lines: camera held_out: <the headline figures> closed_loop=.. ms_per_photo=..
 (the varied twin), then, the old twin's: camera: iou_mean=.. iou_p5=.. tips_1cm=..
 reward_mae=.. closed_loop=.. ms_per_photo=.. shape_exact_iou_mean=.. shape_exact_iou_p5=..
-tips_precision=.. accept_precision=.. refused=..
+tips_precision=.. accept_precision=.. refused=.. tips_1cm_in_view=.. tips_hidden=..
 """
 
 from __future__ import annotations
@@ -218,6 +222,26 @@ def _moved_iou(sim: Simulation, sigma_m: float, seed: int) -> tuple[float, float
     return plant_iou(sim, _OBSERVER.image(state, cfg), tree)
 
 
+def hidden_tips(chamber) -> np.ndarray:  # noqa: ANN001 - core.chamber.Chamber
+    """Per simulator tip (``tip_positions`` order), whether it lies inside another segment
+    as the simulator draws it (its ``thickness``): a bud on its parent stem, a shoot ending
+    on a branch in front of or behind it. A side photo cannot show such a tip."""
+    n = chamber.n_nodes
+    pos, parent, plant = chamber.pos[:n], chamber.parent[:n], chamber.state.plant[:n]
+    tips = chamber.tips()
+    tips = np.concatenate([tips[plant[tips] == p] for p in range(chamber.cfg.plant_count)])
+    segments = np.flatnonzero(parent >= 0)
+    start, end = pos[parent[segments]], pos[segments]
+    half = 0.5 * chamber.thickness()[segments]
+    along = end - start
+    point = pos[tips][:, None]
+    t = np.clip(((point - start) * np.conj(along)).real / np.maximum(np.abs(along) ** 2,
+                                                                      1e-18), 0.0, 1.0)
+    inside = np.abs(start + t * along - point) < half
+    inside[tips[:, None] == segments[None, :]] = False  # (its own segment)
+    return inside.any(axis=1)
+
+
 def plant_iou(sim: Simulation, observation: np.ndarray, tree: PlantTree) -> tuple[float, float]:
     """(the IoU judged, the exact IoU of the observations' plant channels): the same for
     the 84 px challenges; for shape, the judged one is the centre lines' relaxed IoU at 1 cm
@@ -264,22 +288,24 @@ def _cell_line(cell: list[dict]) -> str:
 def _compare(challenge: str, setting: str, seed: int, step: int, sim: Simulation,
              outcome, m) -> dict:  # noqa: ANN001
     tips = np.concatenate(sim.chamber.tip_positions())
+    hidden = hidden_tips(sim.chamber)
     row = {'challenge': challenge, 'setting': setting, 'seed': seed, 'step': step,
            'ok': m.ok, 'error': '' if m.ok else str(m.error), 'sim_reward': outcome.reward,
-           'sim_tips': int(len(tips))}
+           'sim_tips': int(len(tips)), 'sim_tips_hidden': int(hidden.sum())}
     if not m.ok:
-        row.update(iou=0.0, iou_exact=0.0, tips_1cm=0, cam_reward=0.0, cam_tips=0,
-                   tip_precision=0)
+        row.update(iou=0.0, iou_exact=0.0, tips_1cm=0, tips_1cm_in_view=0, cam_reward=0.0,
+                   cam_tips=0, tip_precision=0)
         return row
     iou, exact = plant_iou(sim, m.observation, m.tree)
     measured = m.tree.nodes[m.tree.tips]
+    found = np.zeros(len(tips), bool)
+    precise = 0
     if len(measured):
         d = np.hypot(tips[:, None, 0] - measured[None, :, 0],
                      tips[:, None, 1] - measured[None, :, 1])
-        hit, precise = int((d.min(axis=1) < 0.01).sum()), int((d.min(axis=0) < 0.01).sum())
-    else:
-        hit = precise = 0
-    row.update(iou=iou, iou_exact=exact, tips_1cm=hit,
+        found, precise = d.min(axis=1) < 0.01, int((d.min(axis=0) < 0.01).sum())
+    row.update(iou=iou, iou_exact=exact, tips_1cm=int(found.sum()),
+               tips_1cm_in_view=int((found & ~hidden).sum()),
                cam_reward=m.reward, cam_tips=int(len(measured)), tip_precision=precise,
                ms=m.timings_ms['total'])
     return row
@@ -408,6 +434,10 @@ def headline(rows: list[dict]) -> dict[str, float]:
         'photos': len(rows),
         'iou_mean': float(iou.mean()), 'iou_p5': float(np.percentile(iou, 5)),
         'tips_1cm': sum(r['tips_1cm'] for r in rows) / max(1, sum(r['sim_tips'] for r in rows)),
+        'tips_1cm_in_view': sum(r['tips_1cm_in_view'] for r in rows)
+        / max(1, sum(r['sim_tips'] - r['sim_tips_hidden'] for r in rows)),
+        'tips_hidden': sum(r['sim_tips_hidden'] for r in rows)
+        / max(1, sum(r['sim_tips'] for r in rows)),
         'tips_precision': sum(r['tip_precision'] for r in ok)
         / max(1, sum(r['cam_tips'] for r in ok)),
         'reward_mae': float(np.mean([abs(r['sim_reward'] - r['cam_reward']) for r in rows])),
@@ -421,7 +451,8 @@ def _figures(h: dict[str, float]) -> str:
     return (f'iou_mean={h["iou_mean"]:.3f} iou_p5={h["iou_p5"]:.3f} '
             f'tips_1cm={h["tips_1cm"]:.3f} tips_precision={h["tips_precision"]:.3f} '
             f'reward_mae={h["reward_mae"]:.4f} accept_precision={h["accept_precision"]:.3f} '
-            f'refused={h["refused"]:.3f}')
+            f'refused={h["refused"]:.3f} tips_1cm_in_view={h["tips_1cm_in_view"]:.3f} '
+            f'tips_hidden={h["tips_hidden"]:.3f}')
 
 
 def _print_cells(rows: list[dict]) -> None:
@@ -549,7 +580,8 @@ def main(argv: list[str] | None = None) -> int:
           f'ms_per_photo={split["total"]:.1f} shape_exact_iou_mean={shape.mean():.3f} '
           f'shape_exact_iou_p5={np.percentile(shape, 5):.3f} '
           f'tips_precision={h["tips_precision"]:.3f} '
-          f'accept_precision={h["accept_precision"]:.3f} refused={h["refused"]:.3f}')
+          f'accept_precision={h["accept_precision"]:.3f} refused={h["refused"]:.3f} '
+          f'tips_1cm_in_view={h["tips_1cm_in_view"]:.3f} tips_hidden={h["tips_hidden"]:.3f}')
     return 0
 
 
